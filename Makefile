@@ -1,0 +1,38 @@
+# gearte: `make demo` and `make test` set themselves up in a local virtualenv.
+PYTHON ?= python3
+VENV   ?= .venv
+BIN     = $(VENV)/bin
+STAMP   = $(VENV)/.installed
+OUT    ?= out
+
+.PHONY: demo test bench clean help
+
+help:
+	@echo "make demo   - set up .venv, run the flagship planetary study, write a report under $(OUT)/"
+	@echo "make test   - set up .venv and run the whole test suite (notebooks included)"
+	@echo "make bench  - run the benchmarks, tables in benchmarks/results/"
+
+$(STAMP): pyproject.toml
+	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "gearte needs Python >= 3.11 (found %s); set PYTHON=python3.11 or newer" % sys.version.split()[0])'
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/gearte run examples/planetary_wang2013_random.toml --out $(OUT)/random
+	$(BIN)/gearte run examples/planetary_wang2013_rayleigh_allocated.toml --out $(OUT)/allocated
+	$(BIN)/gearte run examples/planetary_wang2013_rayleigh_random.toml --out $(OUT)/rayleigh_random
+	$(BIN)/gearte compare $(OUT)/random $(OUT)/rayleigh_random $(OUT)/allocated --out $(OUT)/comparison
+	@echo
+	@echo "Demo finished. Open $(OUT)/comparison/report.md (plots beside it);"
+	@echo "each study's own report is $(OUT)/<study>/report.md."
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_planetary_mc.py
+
+clean:
+	rm -rf $(VENV) $(OUT) .pytest_cache

@@ -1,0 +1,40 @@
+"""gearte: transmission error of precision gear drives from their manufacturing and assembly errors."""
+
+from . import _precision  # noqa: F401  (turns on float64 unless GEARTE_X64=0; see _precision)
+from ._distributions import (
+    AbstractMagnitude as AbstractMagnitude,
+    AbstractPhase as AbstractPhase,
+    Fixed as Fixed,
+    FixedPhase as FixedPhase,
+    Normal as Normal,
+    Rayleigh as Rayleigh,
+    RelativePhase as RelativePhase,
+    TruncatedNormal as TruncatedNormal,
+    Uniform as Uniform,
+    UniformPhase as UniformPhase,
+)
+from ._errors import Eccentricity as Eccentricity, ErrorModel as ErrorModel, ErrorSource as ErrorSource
+from ._metrics import (
+    Extrema as Extrema,
+    Spectrum as Spectrum,
+    extrema as extrema,
+    peak as peak,
+    peak_to_peak as peak_to_peak,
+    rms as rms,
+    smooth_peak as smooth_peak,
+    spectrum as spectrum,
+    te_metric as te_metric,
+)
+from ._montecarlo import (
+    MonteCarloResult as MonteCarloResult,
+    Statistics as Statistics,
+    TEStudy as TEStudy,
+    monte_carlo as monte_carlo,
+    statistics as statistics,
+)
+from ._precision import require_x64 as require_x64, x64_enabled as x64_enabled
+from ._signal import Components as Components, TESignal as TESignal, as_frequency as as_frequency, evaluate as evaluate, to_signal as to_signal
+from . import drives as drives, units as units
+from .drives import ExplicitDrive as ExplicitDrive, ExplicitTerm as ExplicitTerm, Planetary2KH as Planetary2KH
+
+__version__ = "0.1.0"

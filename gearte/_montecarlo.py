@@ -1,0 +1,189 @@
+"""Monte Carlo engine: chunked `vmap` over samples, bounded memory, chunk-size independent.
+
+Sample i uses the key ``fold_in(key, i)``: its draws depend only on the study key and
+its index, never on the chunk it falls in, the chunk size or the device count. All
+per-sample arithmetic is elementwise in a fixed order, so results are identical
+(bit for bit) for any chunk size.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from typing import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from ._errors import ErrorModel
+from ._metrics import _grid_size, te_metric
+from ._precision import require_x64
+from ._progress import ProgressBar
+from .drives._base import AbstractDrive
+
+PERCENTILES = (1.0, 5.0, 50.0, 95.0, 99.0, 99.73)
+DEFAULT_SAMPLES = 50_000
+
+
+def as_key(key: int | PRNGKeyArray) -> PRNGKeyArray:
+    """A `jax.random` key from an integer seed or a key."""
+    if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+        if not 0 <= int(key) < 2**63:
+            raise ValueError(f"seed must be a whole number in [0, 2⁶³), got {key}")
+        return jax.random.key(int(key))
+    if isinstance(key, jax.Array) and jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        return key
+    raise ValueError(f"key: expected an integer seed or a jax.random.key(...), got {key!r}")
+
+
+class TEStudy(eqx.Module):
+    """One Monte Carlo sample of a drive's TE: draw errors, build the TE, take a metric.
+
+    Callable as ``study(key) -> metric (rad)``.
+
+    **Arguments:**
+
+    - `drive`: the drive model.
+    - `errors`: how every error source is drawn.
+    - `metric`: "peak", "peak_to_peak" or "rms".
+    """
+
+    drive: AbstractDrive
+    errors: ErrorModel
+    metric: str = eqx.field(static=True)
+
+    def __init__(self, drive: AbstractDrive, errors: ErrorModel, *, metric: str = "peak"):
+        if metric not in ("peak", "peak_to_peak", "rms"):
+            raise ValueError(f"metric: must be 'peak', 'peak_to_peak' or 'rms', got {metric!r}")
+        if errors.counts != drive.error_sources:
+            raise ValueError(f"errors: the error model's sources {errors.counts} do not match the drive's {drive.error_sources}")
+        self.drive, self.errors, self.metric = drive, errors, metric
+
+    def signal(self, key: PRNGKeyArray):
+        """The TE signal of the sample drawn with `key`."""
+        return self.drive.signal(self.errors.sample(key))
+
+    def __call__(self, key: PRNGKeyArray) -> Float[Array, ""]:
+        return te_metric(self.signal(key), self.metric)
+
+    def bytes_per_sample(self) -> int:
+        """Rough peak working memory per sample (bytes), to size chunks."""
+        sig = jax.eval_shape(self.signal, jax.random.key(0))
+        m = _grid_size(sig.orders, 16) if sig.orders else 1
+        return 8 * (12 * m + 64 * len(sig.orders) + 256)
+
+
+def sample_keys(key: PRNGKeyArray, start, size: int) -> PRNGKeyArray:
+    """Keys of samples ``start … start + size − 1``."""
+    idx = start + jnp.arange(size, dtype=jnp.uint32)
+    return jax.vmap(lambda i: jax.random.fold_in(key, i))(idx)
+
+
+@eqx.filter_jit
+def _run_chunk(fn, key, start, size: int):
+    return jax.vmap(fn)(sample_keys(key, start, size))
+
+
+def default_chunk_size(bytes_per_sample: int, *, budget_bytes: int = 256 * 2**20) -> int:
+    """Largest power of two ≤ 16384 whose chunk fits in `budget_bytes`."""
+    c = max(64, min(16384, budget_bytes // max(1, bytes_per_sample)))
+    return 1 << int(math.floor(math.log2(c)))
+
+
+class MonteCarloResult(eqx.Module):
+    """Per-sample values (rad) of a Monte Carlo study, with how they were drawn."""
+
+    values: np.ndarray
+    n_samples: int = eqx.field(static=True)
+    chunk_size: int = eqx.field(static=True)
+    seconds: float = eqx.field(static=True)
+
+
+def monte_carlo(
+    fn: Callable[[PRNGKeyArray], Array],
+    *,
+    key: int | PRNGKeyArray,
+    n_samples: int = DEFAULT_SAMPLES,
+    chunk_size: int | None = None,
+    progress: bool | None = None,
+    desc: str = "Monte Carlo",
+) -> MonteCarloResult:
+    """Run ``fn(key_i)`` for ``n_samples`` samples, in chunks of `chunk_size`.
+
+    **Arguments:**
+
+    - `fn`: one sample, ``key → value`` (an `eqx.Module` such as `TEStudy`, so repeated
+      runs reuse the compiled code).
+    - `key`: integer seed or `jax.random` key; sample i uses ``fold_in(key, i)``.
+    - `n_samples`: number of samples (default 50,000).
+    - `chunk_size`: samples per compiled call; bounds memory; does not change results.
+      Default: sized from ``fn.bytes_per_sample()`` if it has one, else 4096.
+    - `progress`: show a progress bar on stderr (default: when stderr is a terminal).
+
+    **Returns:** a `MonteCarloResult` with the values as a NumPy array.
+    """
+    require_x64()
+    if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
+        raise ValueError(f"n_samples: must be a whole number ≥ 1, got {n_samples!r}")
+    if n_samples >= 2**32:
+        raise ValueError(f"n_samples: at most 2³² − 1 samples per key, got {n_samples}")
+    key = as_key(key)
+    if chunk_size is None:
+        per = fn.bytes_per_sample() if hasattr(fn, "bytes_per_sample") else None
+        chunk_size = default_chunk_size(per) if per else 4096
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
+        raise ValueError(f"chunk_size: must be a whole number ≥ 1, got {chunk_size!r}")
+    chunk = int(min(chunk_size, n_samples))
+    n_chunks = -(-n_samples // chunk)
+    if progress is None:
+        progress = n_chunks > 1 and sys.stderr.isatty()
+    t0 = time.perf_counter()
+    parts = []
+    with ProgressBar(n_samples, desc=desc, enabled=progress) as bar:
+        for c in range(n_chunks):
+            start = c * chunk
+            # The last chunk is padded to full size (one compilation); the extra samples are dropped.
+            out = _run_chunk(fn, key, jnp.asarray(start, dtype=jnp.uint32), chunk)
+            parts.append(out)
+            if progress:
+                out.block_until_ready()
+                bar.update(min(chunk, n_samples - start))
+    values = np.concatenate([np.asarray(p) for p in parts])[:n_samples]
+    return MonteCarloResult(values=values, n_samples=int(n_samples), chunk_size=chunk, seconds=time.perf_counter() - t0)
+
+
+class Statistics(eqx.Module):
+    """Summary statistics of a sample (in the unit named by `unit`)."""
+
+    n: int
+    min: float
+    max: float
+    mean: float
+    std: float
+    percentiles: dict[str, float]
+    unit: str
+
+    def to_dict(self) -> dict:
+        return {"unit": self.unit, "n": self.n, "min": self.min, "max": self.max, "mean": self.mean,
+                "std": self.std, "percentiles": dict(self.percentiles)}
+
+
+def _pct_key(p: float) -> str:
+    return f"{p:g}"
+
+
+def statistics(values, *, unit: str = "rad") -> Statistics:
+    """n, min, max, mean, std (sample, ddof = 1) and percentiles 1/5/50/95/99/99.73 (linear interpolation)."""
+    v = np.asarray(values, dtype=np.float64).ravel()
+    if v.size == 0:
+        raise ValueError("statistics: no values")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"statistics: {np.count_nonzero(~np.isfinite(v))} non-finite values")
+    pct = np.percentile(v, PERCENTILES)
+    return Statistics(n=int(v.size), min=float(v.min()), max=float(v.max()), mean=float(v.mean()),
+                      std=float(v.std(ddof=1)) if v.size > 1 else 0.0,
+                      percentiles={_pct_key(p): float(x) for p, x in zip(PERCENTILES, pct)}, unit=unit)

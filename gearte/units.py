@@ -1,0 +1,28 @@
+"""Units. Inside gearte: lengths of errors in µm, geometry in mm, angles in rad.
+Reports use arcseconds (″) by default, arcminutes (′) or µrad on request."""
+
+import math
+
+ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi  # 206264.806…″ per rad
+ARCMIN_PER_RAD = 180.0 * 60.0 / math.pi
+URAD_PER_RAD = 1e6
+MM_PER_UM = 1e-3
+
+_PER_RAD = {"rad": 1.0, "arcsec": ARCSEC_PER_RAD, "arcmin": ARCMIN_PER_RAD, "urad": URAD_PER_RAD}
+UNIT_SYMBOLS = {"rad": "rad", "arcsec": "″", "arcmin": "′", "urad": "µrad"}
+
+
+def angle_from_rad(value, unit: str = "arcsec"):
+    """Convert an angle in rad to `unit` ("rad", "arcsec", "arcmin" or "urad")."""
+    try:
+        return value * _PER_RAD[unit]
+    except KeyError:
+        raise ValueError(f"unknown angle unit {unit!r}; use one of {sorted(_PER_RAD)}") from None
+
+
+def angle_to_rad(value, unit: str = "arcsec"):
+    """Convert an angle in `unit` to rad."""
+    try:
+        return value / _PER_RAD[unit]
+    except KeyError:
+        raise ValueError(f"unknown angle unit {unit!r}; use one of {sorted(_PER_RAD)}") from None
