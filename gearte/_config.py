@@ -1,0 +1,379 @@
+"""Study configuration files (TOML): read, validate, build the drive and the error model.
+
+Everything is checked here, in Python, before anything is compiled: unknown keys,
+missing fields, wrong types, negative tolerances, NaN, impossible tooth counts.
+Each message names the table and key and says what to write instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import re
+import tomllib
+from pathlib import Path
+from typing import Any, Callable
+
+from ._distributions import (
+    AbstractMagnitude,
+    AbstractPhase,
+    Fixed,
+    FixedPhase,
+    Normal,
+    Rayleigh,
+    RelativePhase,
+    TruncatedNormal,
+    Uniform,
+    UniformPhase,
+)
+from ._errors import ErrorModel, ErrorSource
+from ._montecarlo import DEFAULT_SAMPLES
+from .drives import ExplicitDrive, ExplicitTerm, Planetary2KH
+from .drives._base import AbstractDrive
+
+
+class ConfigError(ValueError):
+    """A configuration file is invalid; the message names the field and the fix."""
+
+
+_MISSING = object()
+
+
+class _Table:
+    """A TOML table being read: tracks which keys were used, so leftovers are reported."""
+
+    def __init__(self, data: Any, where: str):
+        if not isinstance(data, dict):
+            raise ConfigError(f"{where}: expected a table (key = value pairs), got {type(data).__name__}")
+        self.data, self.where, self.used = data, where, set()
+
+    def _fail(self, key: str, msg: str):
+        raise ConfigError(f"{self.where} {key}: {msg}")
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def get(self, key: str, default: Any = _MISSING) -> Any:
+        self.used.add(key)
+        if key not in self.data:
+            if default is _MISSING:
+                raise ConfigError(f"{self.where}: missing required key `{key}`")
+            return default
+        return self.data[key]
+
+    def string(self, key: str, default: Any = _MISSING, *, choices: tuple[str, ...] | None = None) -> str:
+        v = self.get(key, default)
+        if v is default and default is not _MISSING:
+            return v
+        if not isinstance(v, str):
+            self._fail(key, f"expected a string, got {v!r}")
+        if choices is not None and v not in choices:
+            hint = difflib.get_close_matches(v, choices, n=1)
+            self._fail(key, f"must be one of {', '.join(repr(c) for c in choices)}, got {v!r}" + (f" (did you mean {hint[0]!r}?)" if hint else ""))
+        return v
+
+    def integer(self, key: str, default: Any = _MISSING, *, minimum: int | None = None) -> int:
+        v = self.get(key, default)
+        if v is default and default is not _MISSING:
+            return v
+        if isinstance(v, bool) or not isinstance(v, int):
+            self._fail(key, f"expected a whole number, got {v!r}")
+        if minimum is not None and v < minimum:
+            self._fail(key, f"must be ≥ {minimum}, got {v}")
+        return v
+
+    def number(self, key: str, default: Any = _MISSING, *, minimum: float | None = None, positive: bool = False) -> float:
+        v = self.get(key, default)
+        if v is default and default is not _MISSING:
+            return v
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self._fail(key, f"expected a number, got {v!r}")
+        v = float(v)
+        if not math.isfinite(v):
+            self._fail(key, f"must be a finite number, got {v}")
+        if positive and not v > 0:
+            self._fail(key, f"must be > 0, got {v:g}")
+        if minimum is not None and v < minimum:
+            self._fail(key, f"must be ≥ {minimum:g}, got {v:g}" + (" (tolerances and magnitudes cannot be negative)" if minimum == 0 else ""))
+        return v
+
+    def boolean(self, key: str, default: Any = _MISSING) -> bool:
+        v = self.get(key, default)
+        if not isinstance(v, bool):
+            self._fail(key, f"expected true or false, got {v!r}")
+        return v
+
+    def angle(self, stem: str, default: Any = _MISSING) -> float:
+        """An angle given as `stem_deg` (number) or `stem_rad` (number, or a string like "7pi/9"); returns rad."""
+        has_deg, has_rad = self.has(stem + "_deg"), self.has(stem + "_rad")
+        if has_deg and has_rad:
+            raise ConfigError(f"{self.where}: give `{stem}_deg` or `{stem}_rad`, not both")
+        if has_deg:
+            return math.radians(self.number(stem + "_deg"))
+        if has_rad:
+            v = self.get(stem + "_rad")
+            if isinstance(v, str):
+                return parse_angle(v, where=f"{self.where} {stem}_rad")
+            return self.number(stem + "_rad")
+        if default is _MISSING:
+            raise ConfigError(f"{self.where}: missing `{stem}_deg` (degrees) or `{stem}_rad` (radians)")
+        return default
+
+    def table(self, key: str, default: Any = _MISSING) -> "_Table":
+        v = self.get(key, default)
+        if v is default and default is not _MISSING:
+            return v
+        where = f"{self.where[:-1]}.{key}]" if self.where.startswith("[") and self.where.endswith("]") else f"[{key}]"
+        return _Table(v, where)
+
+    def finish(self) -> None:
+        unknown = [k for k in self.data if k not in self.used]
+        if unknown:
+            k = unknown[0]
+            hint = difflib.get_close_matches(k, sorted(self.used), n=1)
+            raise ConfigError(
+                f"{self.where}: unknown key `{k}`" + (f" (did you mean `{hint[0]}`?)" if hint else "")
+                + f"; allowed here: {', '.join(sorted(self.used))}"
+            )
+
+
+_ANGLE_RE = re.compile(r"^\s*([+-]?)\s*(\d+(?:\.\d*)?|\.\d+)?\s*\*?\s*(pi|π)?\s*(?:/\s*(\d+(?:\.\d*)?))?\s*$")
+
+
+def parse_angle(text: str, *, where: str = "angle") -> float:
+    """Read an angle in rad written like "7pi/9", "-pi/9", "0.5", "2*pi/3"."""
+    m = _ANGLE_RE.match(text)
+    if not m or (m.group(2) is None and m.group(3) is None):
+        raise ConfigError(f"{where}: cannot read {text!r} as an angle in rad; write a number or a form like '7pi/9'")
+    sign = -1.0 if m.group(1) == "-" else 1.0
+    coef = float(m.group(2)) if m.group(2) else 1.0
+    value = sign * coef * (math.pi if m.group(3) else 1.0)
+    if m.group(4):
+        den = float(m.group(4))
+        if den == 0:
+            raise ConfigError(f"{where}: division by zero in {text!r}")
+        value /= den
+    return value
+
+
+# ---------------------------------------------------------------- drives
+
+def _planetary(t: _Table) -> Planetary2KH:
+    angles = None
+    if t.has("planet_angles_deg") or t.has("planet_angles_rad"):
+        key = "planet_angles_deg" if t.has("planet_angles_deg") else "planet_angles_rad"
+        raw = t.get(key)
+        if not isinstance(raw, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in raw):
+            raise ConfigError(f"{t.where} {key}: expected a list of numbers")
+        angles = [math.radians(x) if key.endswith("deg") else float(x) for x in raw]
+    centre = t.number("centre_distance_mm", None, positive=True) if t.has("centre_distance_mm") else None
+    kwargs = dict(
+        module=t.number("module_mm", positive=True),
+        pressure_angle=t.angle("pressure_angle", math.radians(20.0)),
+        n_planets=t.integer("n_planets", minimum=1),
+        planet_angles=angles,
+        centre_distance=centre,
+        input=t.string("input", "sun", choices=("sun", "carrier", "ring")),
+        output=t.string("output", "carrier", choices=("sun", "carrier", "ring")),
+        fixed=t.string("fixed", "ring", choices=("sun", "carrier", "ring")),
+        coupling=t.string("coupling", "single_path", choices=("single_path", "load_sharing")),
+    )
+    zs, zp, zr = (t.integer(k, minimum=1) for k in ("z_sun", "z_planet", "z_ring"))
+    try:
+        return Planetary2KH(zs, zp, zr, **kwargs)
+    except ValueError as e:
+        raise ConfigError(f"{t.where}: {e}") from None
+
+
+def _explicit(t: _Table) -> ExplicitDrive:
+    gain = t.number("gain_rad_per_um")
+    name = t.string("name", "explicit components")
+    raw = t.get("terms")
+    if not isinstance(raw, list) or not raw:
+        raise ConfigError(f"{t.where} terms: give a list of [[drive.terms]] tables (source, frequency, phase_sign, offset_rad)")
+    terms = []
+    for i, item in enumerate(raw):
+        tt = _Table(item, f"[[drive.terms]] #{i + 1}")
+        freq = tt.get("frequency")
+        if isinstance(freq, bool) or not isinstance(freq, (int, float, str)):
+            raise ConfigError(f"{tt.where} frequency: expected a number or a fraction string like '7/24'")
+        try:
+            terms.append(ExplicitTerm(tt.string("source"), freq, phase_sign=tt.integer("phase_sign", 1),
+                                      offset=tt.angle("offset", 0.0), scale=tt.number("scale", 1.0)))
+        except ValueError as e:
+            raise ConfigError(f"{tt.where}: {e}") from None
+        tt.finish()
+    try:
+        return ExplicitDrive(terms, gain=gain, name=name)
+    except ValueError as e:
+        raise ConfigError(f"{t.where}: {e}") from None
+
+
+#: Drive builders by `[drive] type`. Each reads its own keys from the table.
+DRIVES: dict[str, Callable[[_Table], AbstractDrive]] = {"planetary_2kh": _planetary, "explicit": _explicit}
+
+
+# ---------------------------------------------------------------- error sources
+
+MAGNITUDE_LAWS = ("fixed", "uniform", "normal", "truncated_normal", "rayleigh")
+PHASE_RULES = ("uniform", "fixed", "relative")
+
+
+def _magnitude(t: _Table, tol: float | None) -> AbstractMagnitude:
+    law = t.string("law", choices=MAGNITUDE_LAWS)
+
+    def need_tol(what: str) -> float:
+        if tol is None:
+            raise ConfigError(f"{t.where}: {what} needs `tolerance_um` in the error source's table")
+        return tol
+
+    try:
+        if law == "fixed":
+            if t.has("fraction_of_tolerance"):
+                return Fixed(t.number("fraction_of_tolerance", minimum=0) * need_tol("fraction_of_tolerance"))
+            if tol is not None and not t.has("value_um"):
+                return Fixed(tol)
+            return Fixed(t.number("value_um", minimum=0))
+        if law == "uniform":
+            return Uniform(t.number("low_um", 0.0, minimum=0), t.number("high_um", tol if tol is not None else _MISSING, minimum=0))
+        if law == "normal":
+            return Normal(t.number("mean_um"), t.number("std_um", minimum=0))
+        if law == "truncated_normal":
+            return TruncatedNormal(t.number("mean_um"), t.number("std_um", positive=True), t.number("low_um", 0.0, minimum=0),
+                                   t.number("high_um", tol if tol is not None else math.inf, minimum=0))
+        # Rayleigh: scale from the tolerance (user's choice, stated in the report).
+        if t.has("scale_um") and t.has("scale_fraction"):
+            raise ConfigError(f"{t.where}: give `scale_um` or `scale_fraction` (× tolerance), not both")
+        if t.has("scale_um"):
+            scale = t.number("scale_um", positive=True)
+        elif t.has("scale_fraction"):
+            scale = t.number("scale_fraction", positive=True) * need_tol("scale_fraction")
+        else:
+            raise ConfigError(f"{t.where}: a Rayleigh law needs `scale_um`, or `scale_fraction` (scale = fraction × tolerance_um)")
+        trunc = None
+        if t.boolean("truncate_at_tolerance", False):
+            trunc = need_tol("truncate_at_tolerance")
+            if trunc <= 0:
+                raise ConfigError(f"{t.where} truncate_at_tolerance: the tolerance is 0; there is nothing to draw below it")
+        return Rayleigh(scale, trunc)
+    except ValueError as e:
+        if isinstance(e, ConfigError):
+            raise
+        raise ConfigError(f"{t.where}: {e}") from None
+
+
+def _phase(t: _Table, symbols: dict[str, str]) -> AbstractPhase:
+    rule = t.string("rule", choices=PHASE_RULES)
+    if rule == "uniform":
+        return UniformPhase()
+    if rule == "fixed":
+        return FixedPhase(t.angle("value"))
+    to = t.string("to")
+    by_symbol = {sym: name for name, sym in symbols.items()}
+    if to in by_symbol:
+        to = by_symbol[to]
+    if to not in symbols:
+        raise ConfigError(f"{t.where} to: {to!r} is not an error source; use one of {sorted(symbols)} or a symbol {sorted(by_symbol)}")
+    return RelativePhase(to, t.angle("offset", 0.0))
+
+
+@dataclasses.dataclass(frozen=True)
+class Study:
+    """A validated study: what `gearte run` computes."""
+
+    name: str
+    title: str
+    description: str
+    metric: str
+    samples: int
+    seed: int
+    unit: str
+    chunk_size: int | None
+    drive: AbstractDrive
+    errors: ErrorModel
+    tolerances_um: dict[str, float | None]
+    notes: tuple[str, ...]
+    source_path: str
+
+
+def load_study(path: str | Path, *, samples: int | None = None, seed: int | None = None) -> Study:
+    """Read and validate a study file; `samples` and `seed` override the file's values."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read ({e.strerror})") from None
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+    try:
+        return _build(raw, str(path), samples=samples, seed=seed)
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}") from None
+
+
+def _build(raw: dict, source: str, *, samples: int | None, seed: int | None) -> Study:
+    top = _Table(raw, "config")
+    st = top.table("study")
+    name = st.string("name")
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
+        raise ConfigError(f"[study] name: use letters, digits, '_', '.', '-' only, got {name!r}")
+    title = st.string("title", name)
+    description = st.string("description", "")
+    metric = st.string("metric", "peak", choices=("peak", "peak_to_peak", "rms"))
+    n = st.integer("samples", DEFAULT_SAMPLES, minimum=1)
+    s = st.integer("seed", minimum=0)
+    unit = st.string("unit", "arcsec", choices=("arcsec", "arcmin", "urad"))
+    chunk = st.integer("chunk_size", None, minimum=1) if st.has("chunk_size") else None
+    notes_raw = st.get("notes", [])
+    if not isinstance(notes_raw, list) or not all(isinstance(x, str) for x in notes_raw):
+        raise ConfigError("[study] notes: expected a list of strings")
+    st.finish()
+    if samples is not None:
+        if samples < 1:
+            raise ConfigError(f"--samples: must be ≥ 1, got {samples}")
+        n = samples
+    if seed is not None:
+        if seed < 0:
+            raise ConfigError(f"--seed: must be ≥ 0, got {seed}")
+        s = seed
+
+    dt = top.table("drive")
+    kind = dt.string("type", choices=tuple(DRIVES))
+    drive = DRIVES[kind](dt)
+    dt.finish()
+
+    et = top.table("errors")
+    counts = drive.error_sources
+    symbols = drive.phase_symbols
+    missing = [k for k in counts if not et.has(k)]
+    if missing:
+        raise ConfigError(f"[errors]: missing error source(s) {missing}; give each a table [errors.NAME] with `magnitude` and `phase` (magnitude law 'fixed' with value_um = 0 leaves one out)")
+    sources, tolerances = {}, {}
+    for src in counts:
+        t = et.table(src)
+        t.where = f"[errors.{src}]"
+        tol = t.number("tolerance_um", None, minimum=0) if t.has("tolerance_um") else None
+        mt, pt = t.table("magnitude"), t.table("phase")
+        mag, ph = _magnitude(mt, tol), _phase(pt, symbols)
+        mt.finish()
+        pt.finish()
+        t.finish()
+        sources[src], tolerances[src] = ErrorSource(mag, ph), tol
+    for k in et.data:
+        if k not in counts:
+            hint = difflib.get_close_matches(k, list(counts), n=1)
+            raise ConfigError(f"[errors]: unknown error source `{k}`" + (f" (did you mean `{hint[0]}`?)" if hint else "") + f"; this drive has {list(counts)}")
+    et.used.update(counts)
+    et.finish()
+    top.finish()
+    try:
+        model = ErrorModel(sources, counts)
+    except ValueError as e:
+        raise ConfigError(f"[errors]: {e}") from None
+    return Study(name=name, title=title, description=description, metric=metric, samples=n, seed=s, unit=unit,
+                 chunk_size=chunk, drive=drive, errors=model, tolerances_um=tolerances, notes=tuple(notes_raw), source_path=source)

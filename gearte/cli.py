@@ -1,0 +1,98 @@
+"""The `gearte` command line.
+
+    gearte run CONFIG.toml --out DIR [--samples N] [--seed S] [--chunk-size C] [--progress/--no-progress]
+    gearte compare RUN_DIR [RUN_DIR ...] --out DIR
+    gearte check CONFIG.toml
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
+    return v
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if not 0 <= v < 2**63:
+        raise argparse.ArgumentTypeError(f"must be in [0, 2^63), got {v}")
+    return v
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="gearte", description="Transmission error of gear drives from their manufacturing and assembly errors.")
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="run a study file and write its results folder")
+    r.add_argument("config", help="study file (TOML)")
+    r.add_argument("--out", required=True, help="results folder (written atomically; replaced if it exists)")
+    r.add_argument("--samples", type=_positive_int, help="number of Monte Carlo samples (overrides the file)")
+    r.add_argument("--seed", type=_seed, help="random seed (overrides the file)")
+    r.add_argument("--chunk-size", type=_positive_int, help="samples per compiled batch (memory bound; results do not change)")
+    r.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar (default: on a terminal)")
+    c = sub.add_parser("compare", help="compare finished runs side by side")
+    c.add_argument("runs", nargs="+", help="results folders of `gearte run`")
+    c.add_argument("--out", required=True, help="folder for the comparison report")
+    k = sub.add_parser("check", help="validate a study file without running it")
+    k.add_argument("config")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    from ._config import ConfigError, load_study
+    from ._io import sigterm_as_interrupt
+
+    try:
+        with sigterm_as_interrupt():
+            if args.command == "check":
+                study = load_study(args.config)
+                print(f"{args.config}: OK ({study.name}: {type(study.drive).__name__}, {len(study.errors.counts)} error sources, "
+                      f"{study.samples:,} samples, seed {study.seed})")
+                return 0
+            if args.command == "compare":
+                from ._run import compare_runs
+
+                compare_runs(args.runs, args.out)
+                print(f"comparison written to {args.out}/report.md")
+                return 0
+            study = load_study(args.config, samples=args.samples, seed=args.seed)
+            if args.chunk_size is not None:
+                import dataclasses
+
+                study = dataclasses.replace(study, chunk_size=args.chunk_size)
+            from ._run import run_study
+
+            command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
+            summary = run_study(study, args.out, progress=args.progress, command=command)
+            te = summary["te"]
+            sym = {"arcsec": "″", "arcmin": "′", "urad": " µrad"}[te["unit"]]
+            print(f"{study.name}: {te['metric']} TE over {te['n']:,} samples: mean {te['mean']:.2f}{sym}, std {te['std']:.2f}{sym}, "
+                  f"min {te['min']:.2f}{sym}, max {te['max']:.2f}{sym}, P99.73 {te['percentiles']['99.73']:.2f}{sym}")
+            print(f"report: {args.out}/report.md")
+            return 0
+    except ConfigError as e:
+        print(f"gearte: error in config: {e}", file=sys.stderr)
+        return 2
+    except (ValueError, FileExistsError) as e:
+        print(f"gearte: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("gearte: interrupted; no results were written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

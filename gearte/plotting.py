@@ -1,0 +1,98 @@
+"""Plots (matplotlib, headless). Kept apart from the numerics: the core never imports this."""
+
+from __future__ import annotations
+
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .units import UNIT_SYMBOLS  # noqa: E402
+
+_METRIC_LABEL = {"peak": "peak |Δθ|", "peak_to_peak": "peak-to-peak Δθ", "rms": "RMS Δθ"}
+
+
+def histogram(values, stats, *, unit: str, metric: str, title: str, path, bins: int = 80, estimate: float | None = None):
+    """TE histogram with its statistics written on it."""
+    sym = UNIT_SYMBOLS[unit]
+    fig, ax = plt.subplots(figsize=(8, 4.8), dpi=110)
+    ax.hist(values, bins=bins, color="#4477aa", alpha=0.85, edgecolor="white", linewidth=0.3)
+    for p, style in (("5", ":"), ("50", "--"), ("95", ":"), ("99.73", "-.")):
+        ax.axvline(stats.percentiles[p], color="#222222", linestyle=style, linewidth=1.0, label=f"P{p} = {stats.percentiles[p]:.1f}{sym}")
+    if estimate is not None:
+        ax.axvline(estimate, color="#cc3311", linewidth=1.5, label=f"estimate {estimate:.1f}{sym}")
+    text = (f"n = {stats.n:,}\nmin = {stats.min:.1f}{sym}\nmax = {stats.max:.1f}{sym}\n"
+            f"mean = {stats.mean:.1f}{sym}\nstd = {stats.std:.1f}{sym}")
+    ax.text(0.02, 0.97, text, transform=ax.transAxes, va="top", ha="left", family="monospace", fontsize=8,
+            bbox=dict(boxstyle="round", facecolor="white", alpha=0.85, edgecolor="#bbbbbb"))
+    ax.set_xlabel(f"{_METRIC_LABEL.get(metric, metric)} ({sym})")
+    ax.set_ylabel("samples")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def trace(theta_rev, te, *, unit: str, title: str, path, marks=()):
+    """TE over the hyper-period against input revolutions; `marks` = [(rev, value, label)]."""
+    sym = UNIT_SYMBOLS[unit]
+    fig, ax = plt.subplots(figsize=(9, 4), dpi=110)
+    ax.plot(theta_rev, te, color="#4477aa", linewidth=0.8)
+    ax.axhline(0.0, color="#999999", linewidth=0.6)
+    for x, y, label in marks:
+        ax.plot([x], [y], "o", color="#cc3311", markersize=5)
+        ax.annotate(label, (x, y), textcoords="offset points", xytext=(6, 6), fontsize=8)
+    ax.set_xlabel("input angle (revolutions of the input)")
+    ax.set_ylabel(f"TE Δθ ({sym})")
+    ax.set_xlim(theta_rev[0], theta_rev[-1])
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def overlay_histograms(series, *, unit: str, metric: str, path, bins: int = 80):
+    """Several studies' TE distributions on one axis; `series` = [(label, values)]."""
+    sym = UNIT_SYMBOLS[unit]
+    fig, ax = plt.subplots(figsize=(9, 5), dpi=110)
+    lo = min(float(np.min(v)) for _, v in series)
+    hi = max(float(np.max(v)) for _, v in series)
+    edges = np.linspace(lo, hi, bins + 1) if hi > lo else bins
+    colors = ["#4477aa", "#cc3311", "#228833", "#ccbb44", "#66ccee", "#aa3377", "#bbbbbb"]
+    for (label, v), c in zip(series, colors * 4):
+        ax.hist(v, bins=edges, histtype="stepfilled", alpha=0.35, color=c, label=f"{label} (mean {np.mean(v):.1f}{sym})")
+        ax.hist(v, bins=edges, histtype="step", color=c, linewidth=1.0)
+    ax.set_xlabel(f"{_METRIC_LABEL.get(metric, metric)} ({sym})")
+    ax.set_ylabel("samples")
+    ax.legend(fontsize=8)
+    ax.set_title("TE distributions compared", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def grid_of_histograms(series, *, unit: str, metric: str, path, bins: int = 60):
+    """Histograms side by side, one panel per study; `series` = [(label, values)]."""
+    sym = UNIT_SYMBOLS[unit]
+    n = len(series)
+    cols = min(n, 2)
+    rows = math.ceil(n / cols)
+    lo = min(float(np.min(v)) for _, v in series)
+    hi = max(float(np.max(v)) for _, v in series)
+    fig, axes = plt.subplots(rows, cols, figsize=(6 * cols, 3.6 * rows), dpi=100, squeeze=False, sharex=True)
+    for ax, (label, v) in zip(axes.flat, series):
+        ax.hist(v, bins=np.linspace(lo, hi, bins + 1) if hi > lo else bins, color="#4477aa", alpha=0.85)
+        ax.set_title(label, fontsize=9)
+        ax.text(0.98, 0.95, f"mean {np.mean(v):.1f}{sym}\nstd {np.std(v, ddof=1) if len(v) > 1 else 0:.1f}{sym}\n"
+                f"min {np.min(v):.1f}{sym}\nmax {np.max(v):.1f}{sym}", transform=ax.transAxes, ha="right", va="top",
+                fontsize=8, family="monospace")
+        ax.set_xlabel(f"{_METRIC_LABEL.get(metric, metric)} ({sym})")
+    for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
