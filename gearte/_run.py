@@ -103,8 +103,13 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
         plotting.trace(theta / (2 * math.pi), te_trace, unit=study.unit, path=tmp / "trace.png",
                        title=f"TE of a typical sample (#{typical}, {study.metric} {values[typical]:.1f}{sym}) over the hyper-period",
                        marks=[(t_mx / (2 * math.pi), mx, f"max {mx:.1f}{sym}"), (t_mn / (2 * math.pi), mn, f"min {mn:.1f}{sym}")])
+        extra_summary, extra_lines = study.drive.study_outputs(study, values_rad, tmp)
+        clash = set(extra_summary) & set(summary)
+        if clash:
+            raise ValueError(f"{type(study.drive).__name__}.study_outputs: keys {sorted(clash)} are already in summary.json")
+        summary.update(extra_summary)
         summary["timing_s"]["total"] = time.perf_counter() - t_start
-        (tmp / "report.md").write_text(_report(study, summary, errs, signal), encoding="utf-8")
+        (tmp / "report.md").write_text(_report(study, summary, errs, signal) + "\n".join(extra_lines) + ("\n" if extra_lines else ""), encoding="utf-8")
         write_json(tmp / "summary.json", summary)
     return summary
 

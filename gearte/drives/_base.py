@@ -42,6 +42,16 @@ class AbstractDrive(eqx.Module):
         """(parameter, value) rows for reports."""
         return []
 
+    def study_outputs(self, study, values_rad, folder) -> tuple[dict, list[str]]:
+        """Drive-specific results of a `gearte run`, beyond the TE statistics.
+
+        Called with the validated study, the per-sample metric values (rad) and the
+        (temporary) results folder, where it may write plots. Returns the entries to add
+        to ``summary.json`` and Markdown lines to append to ``report.md``. None by default.
+        """
+        del study, values_rad, folder
+        return {}, []
+
     def _checked(self, errors: Mapping[str, Eccentricity]) -> dict[str, Eccentricity]:
         """Check names and shapes (at trace time) and broadcast to one entry per instance."""
         unknown = sorted(set(errors) - set(self.error_sources))
