@@ -147,7 +147,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     delta = jnp.concatenate([d_max, d_min], axis=-1)
     n = i_max.shape[-1]
     sign = jnp.concatenate([jnp.ones(n), -jnp.ones(n)])
-    tau = (idx + delta) * h
+    tau = (idx.astype(delta.dtype) + delta) * h
     # Safeguarded Newton steps on the polynomial itself, maxima and minima together. Every point
     # visited is an exact evaluation and the best one wins, so a stray step cannot lose accuracy.
     taus, gs = [], []

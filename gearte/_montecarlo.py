@@ -1,9 +1,13 @@
 """Monte Carlo engine: chunked `vmap` over samples, bounded memory, chunk-size independent.
 
 Sample i uses the key ``fold_in(key, i)``: its draws depend only on the study key and
-its index, never on the chunk it falls in, the chunk size or the device count. All
-per-sample arithmetic is elementwise in a fixed order, so results are identical
-(bit for bit) for any chunk size.
+its index, never on the chunk it falls in, the chunk size or the device count.
+
+Bit-for-bit identical results for any chunk size: XLA may round differently in the last
+bit for different batch shapes, so samples are always computed in *blocks* of one fixed
+shape (set by the study's memory need, not by the chunk size) inside `lax.map`; the
+chunk size only says how many blocks one compiled call runs. Memory is bounded by the
+block, whatever the number of samples.
 """
 
 from __future__ import annotations
@@ -84,13 +88,19 @@ def sample_keys(key: PRNGKeyArray, start, size: int) -> PRNGKeyArray:
 
 
 @eqx.filter_jit
-def _run_chunk(fn, key, start, size: int):
-    return jax.vmap(fn)(sample_keys(key, start, size))
+def _run_chunk(fn, key, start, n_blocks: int, block: int):
+    idx = (start + jnp.arange(n_blocks * block, dtype=jnp.uint32)).reshape(n_blocks, block)
+
+    def one_block(ix):
+        return jax.vmap(fn)(jax.vmap(lambda i: jax.random.fold_in(key, i))(ix))
+
+    out = jax.lax.map(one_block, idx)
+    return jax.tree.map(lambda x: x.reshape((n_blocks * block,) + x.shape[2:]), out)
 
 
-def default_chunk_size(bytes_per_sample: int, *, budget_bytes: int = 256 * 2**20) -> int:
-    """Largest power of two ≤ 16384 whose chunk fits in `budget_bytes`."""
-    c = max(64, min(16384, budget_bytes // max(1, bytes_per_sample)))
+def default_block_size(bytes_per_sample: int, *, budget_bytes: int = 128 * 2**20) -> int:
+    """Largest power of two ≤ 1024 whose block of samples fits in `budget_bytes`."""
+    c = max(1, min(1024, budget_bytes // max(1, bytes_per_sample)))
     return 1 << int(math.floor(math.log2(c)))
 
 
@@ -100,6 +110,7 @@ class MonteCarloResult(eqx.Module):
     values: np.ndarray
     n_samples: int = eqx.field(static=True)
     chunk_size: int = eqx.field(static=True)
+    block_size: int = eqx.field(static=True)
     seconds: float = eqx.field(static=True)
 
 
@@ -109,10 +120,11 @@ def monte_carlo(
     key: int | PRNGKeyArray,
     n_samples: int = DEFAULT_SAMPLES,
     chunk_size: int | None = None,
+    block_size: int | None = None,
     progress: bool | None = None,
     desc: str = "Monte Carlo",
 ) -> MonteCarloResult:
-    """Run ``fn(key_i)`` for ``n_samples`` samples, in chunks of `chunk_size`.
+    """Run ``fn(key_i)`` for ``n_samples`` samples.
 
     **Arguments:**
 
@@ -120,8 +132,12 @@ def monte_carlo(
       runs reuse the compiled code).
     - `key`: integer seed or `jax.random` key; sample i uses ``fold_in(key, i)``.
     - `n_samples`: number of samples (default 50,000).
-    - `chunk_size`: samples per compiled call; bounds memory; does not change results.
-      Default: sized from ``fn.bytes_per_sample()`` if it has one, else 4096.
+    - `chunk_size`: samples per compiled call (rounded up to whole blocks; default 16
+      blocks). Sets the progress-bar step; never changes the results.
+    - `block_size`: samples computed together in one vectorised block; bounds memory.
+      Default: from ``fn.bytes_per_sample()`` (128 MiB per block), else 256. Results are
+      bit-identical for any chunk size at a given block size; another block size may
+      change them in the last bit.
     - `progress`: show a progress bar on stderr (default: when stderr is a terminal).
 
     **Returns:** a `MonteCarloResult` with the values as a NumPy array.
@@ -132,28 +148,33 @@ def monte_carlo(
     if n_samples >= 2**32:
         raise ValueError(f"n_samples: at most 2³² − 1 samples per key, got {n_samples}")
     key = as_key(key)
-    if chunk_size is None:
+    for name, v in (("chunk_size", chunk_size), ("block_size", block_size)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1):
+            raise ValueError(f"{name}: must be a whole number ≥ 1, got {v!r}")
+    if block_size is None:
         per = fn.bytes_per_sample() if hasattr(fn, "bytes_per_sample") else None
-        chunk_size = default_chunk_size(per) if per else 4096
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
-        raise ValueError(f"chunk_size: must be a whole number ≥ 1, got {chunk_size!r}")
-    chunk = int(min(chunk_size, n_samples))
-    n_chunks = -(-n_samples // chunk)
+        block_size = default_block_size(per) if per else 256
+    block = int(block_size)
+    blocks_per_call = max(1, -(-int(chunk_size) // block)) if chunk_size is not None else 16
+    blocks_per_call = min(blocks_per_call, -(-n_samples // block))
+    chunk = blocks_per_call * block
+    n_calls = -(-n_samples // chunk)
     if progress is None:
-        progress = n_chunks > 1 and sys.stderr.isatty()
+        progress = n_calls > 1 and sys.stderr.isatty()
     t0 = time.perf_counter()
     parts = []
     with ProgressBar(n_samples, desc=desc, enabled=progress) as bar:
-        for c in range(n_chunks):
+        for c in range(n_calls):
             start = c * chunk
-            # The last chunk is padded to full size (one compilation); the extra samples are dropped.
-            out = _run_chunk(fn, key, jnp.asarray(start, dtype=jnp.uint32), chunk)
+            # Every call has the same shape (one compilation); samples past n_samples are dropped.
+            out = _run_chunk(fn, key, jnp.asarray(start, dtype=jnp.uint32), blocks_per_call, block)
             parts.append(out)
             if progress:
                 out.block_until_ready()
                 bar.update(min(chunk, n_samples - start))
     values = np.concatenate([np.asarray(p) for p in parts])[:n_samples]
-    return MonteCarloResult(values=values, n_samples=int(n_samples), chunk_size=chunk, seconds=time.perf_counter() - t0)
+    return MonteCarloResult(values=values, n_samples=int(n_samples), chunk_size=chunk, block_size=block,
+                            seconds=time.perf_counter() - t0)
 
 
 class Statistics(eqx.Module):

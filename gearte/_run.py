@@ -75,6 +75,7 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
         "samples": study.samples,
         "seed": study.seed,
         "chunk_size": mc.chunk_size,
+        "block_size": mc.block_size,
         "drive": dict(study.drive.describe()),
         "errors": {name: {"tolerance_um": study.tolerances_um[name], "count": study.errors.counts[name],
                           "phase_symbol": study.drive.phase_symbols.get(name, name),
@@ -147,7 +148,7 @@ def _report(study: Study, s: dict, errs, signal) -> str:
     lines += ["", "## Assumptions", "",
               f"- Metric: {METRIC_TEXT[study.metric]}.",
               "- TE Δθ = θ_out − θ_in / i (rad inside gearte; reported in " + study.unit + f", 1 rad = {ARCSEC_PER_RAD:.3f}″).",
-              f"- Samples: {s['samples']:,}; seed {s['seed']}; {s['assumptions']['random_keys']}. Results do not depend on the chunk size ({s['chunk_size']} here).",
+              f"- Samples: {s['samples']:,}; seed {s['seed']}; {s['assumptions']['random_keys']}. Results do not depend on the chunk size ({s["chunk_size"]} here; blocks of {s["block_size"]}).",
               "- Random phases are uniform on [0, 2π); magnitudes follow the laws in the table above.",
               f"- Precision: {s['assumptions']['precision']}.",
               f"- Exact extrema: {s['assumptions']['exact_extrema']}."]
