@@ -15,7 +15,7 @@ import numpy as np
 from ._config import Study
 from ._io import atomic_output_dir, write_json
 from ._metrics import extrema
-from ._montecarlo import PERCENTILES, TEStudy, as_key, monte_carlo, statistics
+from ._montecarlo import PERCENTILES, as_key, monte_carlo, statistics
 from ._signal import evaluate
 from .units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 
@@ -46,7 +46,7 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
     from . import plotting
 
     t_start = time.perf_counter()
-    te_study = TEStudy(study.drive, study.errors, metric=study.metric)
+    te_study = study.drive.te_study(study.errors, metric=study.metric)
     mc = monte_carlo(te_study, key=study.seed, n_samples=study.samples, chunk_size=study.chunk_size,
                      progress=progress, desc=study.name)
     values_rad = mc.values
@@ -148,7 +148,7 @@ def _report(study: Study, s: dict, errs, signal) -> str:
     lines += ["", "## Assumptions", "",
               f"- Metric: {METRIC_TEXT[study.metric]}.",
               "- TE Δθ = θ_out − θ_in / i (rad inside gearte; reported in " + study.unit + f", 1 rad = {ARCSEC_PER_RAD:.3f}″).",
-              f"- Samples: {s['samples']:,}; seed {s['seed']}; {s['assumptions']['random_keys']}. Results do not depend on the chunk size ({s["chunk_size"]} here; blocks of {s["block_size"]}).",
+              f"- Samples: {s['samples']:,}; seed {s['seed']}; {s['assumptions']['random_keys']}. Samples are computed in blocks of {s['block_size']}, {s['chunk_size']} per compiled call; results do not depend on the chunk size.",
               "- Random phases are uniform on [0, 2π); magnitudes follow the laws in the table above.",
               f"- Precision: {s['assumptions']['precision']}.",
               f"- Exact extrema: {s['assumptions']['exact_extrema']}."]

@@ -1,0 +1,174 @@
+"""`gearte run` / `compare` / `check`, config validation, atomic results folders."""
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gearte
+from gearte import cli
+from gearte._config import ConfigError, load_study, parse_angle
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = sorted((ROOT / "examples").glob("planetary_*.toml"))
+RANDOM = ROOT / "examples" / "planetary_wang2013_random.toml"
+
+
+def run(*args):
+    return cli.main([str(a) for a in args])
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
+def test_examples_run_and_write_every_output(path, tmp_path):
+    out = tmp_path / "res"
+    assert run("run", path, "--out", out, "--samples", 600, "--seed", 3) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["histogram.png", "report.md", "samples.npz", "summary.json", "trace.png"]
+    s = json.loads((out / "summary.json").read_text())
+    te = s["te"]
+    assert te["unit"] == "arcsec" and te["metric"] == "peak" and te["n"] == 600
+    assert set(te["percentiles"]) == {"1", "5", "50", "95", "99", "99.73"}
+    assert te["min"] <= te["percentiles"]["1"] <= te["percentiles"]["50"] <= te["percentiles"]["99.73"] <= te["max"]
+    assert s["seed"] == 3 and s["samples"] == 600
+    with np.load(out / "samples.npz") as z:
+        np.testing.assert_allclose(z["te"], z["te_rad"] * 180 * 3600 / math.pi, rtol=1e-14)
+        np.testing.assert_allclose(np.mean(z["te"]), te["mean"], rtol=1e-12)
+    report = (out / "report.md").read_text()
+    for needed in ("seed 3", "600", "float64", "uniform on [0, 2π)", "single path", "hyper-period"):
+        assert needed in report, needed
+    if "rayleigh" in path.stem:
+        assert "Rayleigh, scale σ" in report and "truncated at" in report
+
+
+def test_same_seed_same_numbers_and_override(tmp_path):
+    a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+    run("run", RANDOM, "--out", a, "--samples", 300, "--seed", 9)
+    run("run", RANDOM, "--out", b, "--samples", 300, "--seed", 9, "--chunk-size", 7)
+    run("run", RANDOM, "--out", c, "--samples", 300, "--seed", 10)
+    za, zb, zc = (np.load(d / "samples.npz")["te"] for d in (a, b, c))
+    np.testing.assert_array_equal(za, zb)
+    assert not np.array_equal(za, zc)
+
+
+def test_compare(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    run("run", RANDOM, "--out", a, "--samples", 300)
+    run("run", ROOT / "examples" / "planetary_wang2013_half.toml", "--out", b, "--samples", 300, "--seed", 1001)
+    assert run("compare", a, b, "--out", tmp_path / "cmp") == 0
+    cmp = json.loads((tmp_path / "cmp" / "comparison.json").read_text())
+    assert [r["name"] for r in cmp["runs"]] == ["wang2013-random", "wang2013-half"]
+    # Same seed, half magnitudes: exactly half the mean.
+    np.testing.assert_allclose(cmp["runs"][1]["mean_vs_first"], 0.5, rtol=1e-12)
+    assert (tmp_path / "cmp" / "overlay.png").exists() and (tmp_path / "cmp" / "report.md").exists()
+    assert run("compare", a, tmp_path / "nothing", "--out", tmp_path / "cmp2") == 2
+    assert not (tmp_path / "cmp2").exists()
+
+
+def config_text(**replace):
+    text = RANDOM.read_text() + replace.pop("__append__", "")
+    for old, new in replace.items():
+        assert old in text, old
+        text = text.replace(old, new)
+    return text
+
+
+BAD = {
+    "unknown key": ({"z_sun = 12": "z_sun = 12\nz_moon = 3"}, "[drive]: unknown key `z_moon`"),
+    "typo with hint": ({"coupling = ": "couplin = "}, "did you mean `coupling`"),
+    "missing field": ({"z_planet = 36\n": ""}, "missing required key `z_planet`"),
+    "negative tolerance": ({"tolerance_um = 13": "tolerance_um = -13"}, "[errors.sun_manufacturing] tolerance_um: must be ≥ 0"),
+    "impossible tooth counts": ({"z_ring = 84": "z_ring = 85"}, "z_ring = z_sun + 2·z_planet"),
+    "not assemblable": ({"z_sun = 12": "z_sun = 14", "z_ring = 84": "z_ring = 86"}, "cannot be assembled"),
+    "wrong type": ({"z_sun = 12": 'z_sun = "twelve"'}, "[drive] z_sun: expected a whole number"),
+    "NaN": ({"module_mm = 1.0": "module_mm = nan"}, "[drive] module_mm: must be a finite number"),
+    "unknown source": ({"__append__": '\n[errors.ring_assembly]\ntolerance_um = 1\nmagnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n'},
+                       "unknown error source `ring_assembly`"),
+    "missing source": ({"[errors.carrier_assembly]": "[unused]"}, "missing error source(s) ['carrier_assembly']"),
+    "bad law": ({'magnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]':
+                 'magnitude = { law = "rayleig" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]'}, "did you mean 'rayleigh'"),
+    "bad seed": ({"seed = 1001": "seed = -4"}, "[study] seed: must be ≥ 0"),
+    "bad metric": ({'metric = "peak"': 'metric = "amplitude"'}, "[study] metric: must be one of"),
+    "bad angle": ({'pressure_angle_rad = "pi/9"': 'pressure_angle_rad = "pie/9"'}, "cannot read 'pie/9'"),
+    "both angle units": ({'pressure_angle_rad = "pi/9"': 'pressure_angle_rad = "pi/9"\npressure_angle_deg = 20'}, "not both"),
+    "not toml": ({"[study]": "[study"}, "not valid TOML"),
+    "rayleigh without scale": ({'magnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]':
+                                'magnitude = { law = "rayleigh" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]'}, "needs `scale_um`"),
+    "relative to nothing": ({'magnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]':
+                             'magnitude = { law = "fixed" }\nphase = { rule = "relative", to = "beta_q" }\n\n[errors.planet_manufacturing]'}, "'beta_q' is not an error source"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_configs_exit_nonzero_naming_the_field_and_write_nothing(case, tmp_path, capsys):
+    replace, message = dict(BAD[case][0]), BAD[case][1]
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(config_text(**replace))
+    out = tmp_path / "out"
+    assert run("run", cfg, "--out", out, "--samples", 10) == 2
+    err = capsys.readouterr().err
+    assert message in err, err
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == [cfg]
+    assert run("check", cfg) == 2
+
+
+def test_check_ok(capsys):
+    assert run("check", RANDOM) == 0
+    assert "OK" in capsys.readouterr().out
+
+
+def test_failed_run_leaves_nothing_and_keeps_the_previous_result(tmp_path, monkeypatch):
+    out = tmp_path / "res"
+    assert run("run", RANDOM, "--out", out, "--samples", 200) == 0
+    before = (out / "summary.json").read_text()
+
+    from gearte import plotting
+
+    def boom(*a, **k):
+        raise KeyboardInterrupt("simulated Ctrl-C while writing plots")
+
+    monkeypatch.setattr(plotting, "trace", boom)
+    assert run("run", RANDOM, "--out", out, "--samples", 300) == 130
+    assert (out / "summary.json").read_text() == before  # untouched
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["res"]  # no partial folders left
+    fresh = tmp_path / "fresh"
+    assert run("run", RANDOM, "--out", fresh, "--samples", 300) == 130
+    assert not fresh.exists()
+
+
+def test_parse_angle():
+    assert parse_angle("7pi/9") == pytest.approx(7 * math.pi / 9, rel=1e-15)
+    assert parse_angle("-pi/9") == pytest.approx(-math.pi / 9, rel=1e-15)
+    assert parse_angle("2*pi/3") == pytest.approx(2 * math.pi / 3, rel=1e-15)
+    assert parse_angle("0.5") == 0.5
+    assert parse_angle("π") == pytest.approx(math.pi)
+    for bad in ("", "pi/0", "7pi/9x", "/9"):
+        with pytest.raises(ConfigError):
+            parse_angle(bad)
+
+
+def test_load_study_builds_the_table3_rule():
+    s = load_study(ROOT / "examples" / "planetary_wang2013_rayleigh_allocated.toml")
+    src = s.errors.sources
+    assert isinstance(src["sun_assembly"].phase, gearte.RelativePhase) and src["sun_assembly"].phase.to == "ring_manufacturing"
+    assert float(src["sun_assembly"].phase.offset) == pytest.approx(7 * math.pi / 9)
+    assert float(src["carrier_assembly"].phase.offset) == pytest.approx(8 * math.pi / 9)
+    assert isinstance(src["planet_assembly"].phase, gearte.FixedPhase)
+    r = src["sun_manufacturing"].magnitude
+    assert float(r.scale) == 6.5 and float(r.truncate_at) == 13.0
+
+
+def test_real_command_line_entry_point(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(config_text(**{"tolerance_um = 13": "tolerance_um = -13"}))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.run([sys.executable, "-m", "gearte", "run", str(bad), "--out", str(tmp_path / "o")], capture_output=True, text=True, env=env)
+    assert p.returncode == 2
+    assert "tolerance_um" in p.stderr and "≥ 0" in p.stderr
+    p = subprocess.run([sys.executable, "-m", "gearte", "run", str(RANDOM), "--out", str(tmp_path / "o"), "--samples", "0"],
+                       capture_output=True, text=True, env=env)
+    assert p.returncode == 2 and "--samples" in p.stderr
