@@ -245,3 +245,16 @@ def test_te_is_linear_in_small_errors_and_differentiable():
     eps = 1e-4
     fd = np.array([(f(m0.at[i].add(eps)) - f(m0.at[i].add(-eps))) / (2 * eps) for i in range(len(m0))])
     np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-12)
+
+
+def test_eq9_literal_config_is_the_paper_equation():
+    from pathlib import Path
+
+    from gearte._config import load_study
+
+    s = load_study(Path(__file__).resolve().parents[1] / "examples" / "planetary_wang2013_eq9_literal.toml")
+    rng = np.random.default_rng(21)
+    theta = np.linspace(0, 2 * PI * 24, 500)
+    errs, E, ph = random_errors(rng, n_planets=1)
+    errs = {k: gearte.Eccentricity(v.magnitude.reshape(-1)[0], v.phase.reshape(-1)[0]) for k, v in errs.items()}
+    np.testing.assert_allclose(gearte.evaluate(s.drive.signal(errs), theta), eq9_numpy(theta, E, ph, 11 / 24), rtol=1e-10, atol=1e-16)
