@@ -42,6 +42,24 @@ class AbstractDrive(eqx.Module):
         """(parameter, value) rows for reports."""
         return []
 
+    @property
+    def tolerances_um(self) -> dict[str, float]:
+        """Tolerances (µm) the drive itself declares for its error sources, by name; none by default.
+
+        A study file may then leave out ``tolerance_um`` in ``[errors.NAME]``.
+        """
+        return {}
+
+    def te_study(self, errors, *, metric: str = "peak"):
+        """The per-sample Monte Carlo function (``key -> metric``, rad) that `gearte run` uses.
+
+        `TEStudy` by default; a drive overrides it when it has a cheaper exact way to take
+        its metric (it must accept the same `metric` names).
+        """
+        from .._montecarlo import TEStudy
+
+        return TEStudy(self, errors, metric=metric)
+
     def study_outputs(self, study, values_rad, folder) -> tuple[dict, list[str]]:
         """Drive-specific results of a `gearte run`, beyond the TE statistics.
 
