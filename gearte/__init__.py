@@ -13,7 +13,24 @@ from ._distributions import (
     Uniform as Uniform,
     UniformPhase as UniformPhase,
 )
+from ._costs import (
+    AbstractCostModel as AbstractCostModel,
+    Exponential as Exponential,
+    GradeTable as GradeTable,
+    Power as Power,
+    Reciprocal as Reciprocal,
+    ReciprocalSquare as ReciprocalSquare,
+)
 from ._errors import Eccentricity as Eccentricity, ErrorModel as ErrorModel, ErrorSource as ErrorSource
+from ._iso1328 import (
+    eccentricity_from_runout as eccentricity_from_runout,
+    grade_for_tolerance as grade_for_tolerance,
+    grade_range as grade_range,
+    iso1328_tolerance as iso1328_tolerance,
+    iso1328_tolerances as iso1328_tolerances,
+    nearest_grade as nearest_grade,
+    round_tolerance as round_tolerance,
+)
 from ._metrics import (
     Extrema as Extrema,
     Spectrum as Spectrum,
@@ -34,7 +51,26 @@ from ._montecarlo import (
 )
 from ._precision import require_x64 as require_x64, x64_enabled as x64_enabled
 from ._signal import Components as Components, TESignal as TESignal, as_frequency as as_frequency, evaluate as evaluate, to_signal as to_signal
+from ._records import (
+    Record as Record,
+    RecordSpectrum as RecordSpectrum,
+    SpectralLines as SpectralLines,
+    band_envelope as band_envelope,
+    record as record,
+    record_envelope as record_envelope,
+    record_spectrum as record_spectrum,
+    spectral_lines as spectral_lines,
+)
+from ._twoscale import TwoScaleExtrema as TwoScaleExtrema, extrema_two_scale as extrema_two_scale
 from . import drives as drives, units as units
 from .drives import ExplicitDrive as ExplicitDrive, ExplicitTerm as ExplicitTerm, Planetary2KH as Planetary2KH
+from .drives import HarmonicDrive as HarmonicDrive, HarmonicSource as HarmonicSource
+from .drives import (
+    CycloidErrors as CycloidErrors,
+    CycloidModification as CycloidModification,
+    CycloidPin as CycloidPin,
+    CycloidStudy as CycloidStudy,
+    CycloidTolerances as CycloidTolerances,
+)
 
 __version__ = "0.1.0"

@@ -21,6 +21,7 @@ from ._distributions import (
     Fixed,
     FixedPhase,
     Normal,
+    Optimised,
     Rayleigh,
     RelativePhase,
     TruncatedNormal,
@@ -214,10 +215,19 @@ def _explicit(t: _Table) -> ExplicitDrive:
 DRIVES: dict[str, Callable[[_Table], AbstractDrive]] = {"planetary_2kh": _planetary, "explicit": _explicit}
 
 
+def _harmonic(t: _Table) -> AbstractDrive:
+    from .drives._harmonic_config import build
+
+    return build(t)
+
+
+DRIVES["harmonic"] = _harmonic
+
+
 # ---------------------------------------------------------------- error sources
 
 MAGNITUDE_LAWS = ("fixed", "uniform", "normal", "truncated_normal", "rayleigh")
-PHASE_RULES = ("uniform", "fixed", "relative")
+PHASE_RULES = ("uniform", "fixed", "relative", "optimise")
 
 
 def _magnitude(t: _Table, tol: float | None) -> AbstractMagnitude:
@@ -269,8 +279,17 @@ def _phase(t: _Table, symbols: dict[str, str]) -> AbstractPhase:
         return UniformPhase()
     if rule == "fixed":
         return FixedPhase(t.angle("value"))
-    to = t.string("to")
     by_symbol = {sym: name for name, sym in symbols.items()}
+    if rule == "optimise":
+        # Chosen by the allocation optimiser: an offset from `relative_to`, or absolute.
+        if not t.has("relative_to"):
+            return Optimised(None)
+        ref = t.string("relative_to")
+        ref = by_symbol.get(ref, ref)
+        if ref not in symbols:
+            raise ConfigError(f"{t.where} relative_to: {ref!r} is not an error source; use one of {sorted(symbols)} or a symbol {sorted(by_symbol)}")
+        return Optimised(ref)
+    to = t.string("to")
     if to in by_symbol:
         to = by_symbol[to]
     if to not in symbols:
@@ -295,6 +314,37 @@ class Study:
     tolerances_um: dict[str, float | None]
     notes: tuple[str, ...]
     source_path: str
+    allocation: "AllocationSpec | None" = None
+    budget: "BudgetSpec | None" = None
+
+
+@dataclasses.dataclass(frozen=True)
+class BudgetSpec:
+    """`[budget]`: a tolerance-budget optimisation (see `gearte._budget`). Spec values in the study's unit."""
+
+    spec: float
+    constraint: str
+    target: float
+    samples: int
+    check_samples: int
+    costs: dict
+    maximum_um: dict[str, float]
+    grades: dict[str, dict]
+    pareto_specs: tuple[float, ...]
+    compare_random_assembly: bool
+
+
+@dataclasses.dataclass(frozen=True)
+class AllocationSpec:
+    """`[allocation]`: how the phases marked `rule = "optimise"` are chosen (see `gearte._allocation`)."""
+
+    objective: str
+    datum: str
+    adjust: dict[str, str]
+    starts: int
+    surrogate_samples: int
+    check_samples: int
+    seed_rule: dict[str, float] | None
 
 
 def load_study(path: str | Path, *, samples: int | None = None, seed: int | None = None) -> Study:
@@ -357,7 +407,11 @@ def _build(raw: dict, source: str, *, samples: int | None, seed: int | None) -> 
     for src in counts:
         t = et.table(src)
         t.where = f"[errors.{src}]"
-        tol = t.number("tolerance_um", None, minimum=0) if t.has("tolerance_um") else None
+        declared = drive.tolerances_um.get(src)
+        tol = t.number("tolerance_um", None, minimum=0) if t.has("tolerance_um") else declared
+        if declared is not None and tol != declared:
+            raise ConfigError(f"[errors.{src}] tolerance_um: {tol:g} µm, but the drive declares {declared:g} µm for this "
+                              "source; give it in one place (or make them agree)")
         mt, pt = t.table("magnitude"), t.table("phase")
         mag, ph = _magnitude(mt, tol), _phase(pt, symbols)
         mt.finish()
@@ -370,10 +424,143 @@ def _build(raw: dict, source: str, *, samples: int | None, seed: int | None) -> 
             raise ConfigError(f"[errors]: unknown error source `{k}`" + (f" (did you mean `{hint[0]}`?)" if hint else "") + f"; this drive has {list(counts)}")
     et.used.update(counts)
     et.finish()
+    allocation = _allocation(top, sources, tolerances, symbols, metric)
+    budget = _budget(top, sources, tolerances, metric)
+    if allocation is not None and budget is not None:
+        raise ConfigError("[budget]: give the assembly rule as concrete phases (rule = \"relative\" or \"fixed\") in a budget study; optimise the rule in its own study first")
     top.finish()
     try:
         model = ErrorModel(sources, counts)
     except ValueError as e:
         raise ConfigError(f"[errors]: {e}") from None
     return Study(name=name, title=title, description=description, metric=metric, samples=n, seed=s, unit=unit,
-                 chunk_size=chunk, drive=drive, errors=model, tolerances_um=tolerances, notes=tuple(notes_raw), source_path=source)
+                 chunk_size=chunk, drive=drive, errors=model, tolerances_um=tolerances, notes=tuple(notes_raw), source_path=source,
+                 allocation=allocation, budget=budget)
+
+
+def _allocation(top: _Table, sources: dict, tolerances: dict, symbols: dict[str, str], metric: str) -> AllocationSpec | None:
+    optimised = {n: s.phase for n, s in sources.items() if isinstance(s.phase, Optimised)}
+    if not top.has("allocation"):
+        if optimised:
+            raise ConfigError(f"[allocation]: phases of {sorted(optimised)} are to be optimised; add an [allocation] table (objective = \"worst_case\" | \"expected\" | \"robust\")")
+        return None
+    t = top.table("allocation")
+    if not optimised:
+        raise ConfigError("[allocation]: no phase is marked `rule = \"optimise\"` in [errors]; mark the assembly phases to choose")
+    if metric != "peak":
+        raise ConfigError("[allocation]: assembly rules are optimised for the peak metric; set [study] metric = \"peak\"")
+    datums = {r.relative_to for r in optimised.values() if r.relative_to is not None}
+    if len(datums) > 1:
+        raise ConfigError(f"[errors]: optimised phases must share one datum, got relative_to {sorted(datums)}")
+    by_symbol = {sym: nm for nm, sym in symbols.items()}
+    datum = datums.pop() if datums else None
+    if t.has("datum"):
+        d = t.string("datum")
+        d = by_symbol.get(d, d)
+        if datum is not None and d != datum:
+            raise ConfigError(f"[allocation] datum: {d!r} differs from the optimised phases' relative_to {datum!r}")
+        datum = d
+    if datum is None:
+        raise ConfigError("[allocation] datum: name the error source whose phase is the assembly datum (e.g. \"ring_manufacturing\")")
+    if datum not in sources or not isinstance(sources[datum].phase, UniformPhase):
+        raise ConfigError(f"[allocation] datum: {datum!r} must be an error source with a uniform (unknown) phase")
+    missing = sorted(n for n, tol in tolerances.items() if tol is None)
+    if missing:
+        raise ConfigError(f"[allocation]: every error source needs `tolerance_um` for the allocation objectives; missing in {missing}")
+    seed_rule = None
+    if t.has("seed_rule"):
+        sr = t.table("seed_rule")
+        seed_rule = {n: sr.angle(n) for n in optimised}
+        sr.finish()
+    spec = AllocationSpec(
+        objective=t.string("objective", "worst_case", choices=("worst_case", "expected", "robust")),
+        datum=datum,
+        adjust={n: ("relative" if r.relative_to is not None else "absolute") for n, r in optimised.items()},
+        starts=t.integer("starts", 16, minimum=1),
+        surrogate_samples=t.integer("surrogate_samples", 512, minimum=16),
+        check_samples=t.integer("check_samples", 50_000, minimum=100),
+        seed_rule=seed_rule,
+    )
+    t.finish()
+    return spec
+
+
+COST_MODELS = ("reciprocal", "reciprocal_square", "exponential", "power", "grade_table")
+
+
+def _cost_model(t: _Table, nominal: float):
+    """A cost model from its table; without coefficients, normalised to cost 1 at the nominal tolerance."""
+    from . import _costs
+
+    kind = t.string("model", choices=COST_MODELS)
+    try:
+        if kind == "grade_table":
+            raw = t.table("costs_by_grade")
+            costs = {int(k): raw.number(k, minimum=0) for k in list(raw.data)}
+            g = _costs.GradeTable(costs, quantity=t.string("quantity"), standard=t.string("standard"), module=t.number("module_mm", positive=True),
+                                  diameter=t.number("diameter_mm", positive=True), face_width=t.number("face_width_mm", None, positive=True) if t.has("face_width_mm") else None)
+            return g
+        cls = {"reciprocal": _costs.Reciprocal, "reciprocal_square": _costs.ReciprocalSquare, "exponential": _costs.Exponential,
+               "power": _costs.Power}[kind]
+        params = {"reciprocal": ("a", "b"), "reciprocal_square": ("a", "b"), "exponential": ("a", "b", "k"), "power": ("a", "k")}[kind]
+        if not any(t.has(k) for k in params):
+            if kind == "power":
+                return cls.normalised(nominal, k=t.number("exponent", 1.0, positive=True))
+            return cls.normalised(nominal)
+        return cls(*[t.number(k) for k in params])
+    except ValueError as e:
+        if isinstance(e, ConfigError):
+            raise
+        raise ConfigError(f"{t.where}: {e}") from None
+
+
+def _budget(top: _Table, sources: dict, tolerances: dict, metric: str) -> BudgetSpec | None:
+    if not top.has("budget"):
+        return None
+    t = top.table("budget")
+    missing = sorted(n for n, tol in tolerances.items() if not tol)
+    if missing:
+        raise ConfigError(f"[budget]: every error source needs a nominal `tolerance_um` > 0; missing or zero in {missing}")
+    spec = t.number("spec", positive=True)
+    constraint = t.string("constraint", "yield", choices=("yield", "mean_k_sigma"))
+    target = t.number("target", 0.9973 if constraint == "yield" else 3.0, minimum=0)
+    if constraint == "yield" and not 0.5 <= target < 1:
+        raise ConfigError(f"[budget] target: a yield in [0.5, 1), got {target:g}")
+    default = t.string("cost_model", "reciprocal", choices=COST_MODELS[:-1])
+    overrides = t.table("costs", {}) if t.has("costs") else None
+    costs = {}
+    for n in sources:
+        if overrides is not None and overrides.has(n):
+            ct = overrides.table(n)
+            costs[n] = _cost_model(ct, tolerances[n])
+            ct.finish()
+        else:
+            costs[n] = _cost_model(_Table({"model": default}, f"[budget] cost_model"), tolerances[n])
+    if overrides is not None:
+        overrides.finish()
+    factor = t.number("maximum_factor", 10.0, positive=True)
+    if factor <= 1:
+        raise ConfigError(f"[budget] maximum_factor: must be > 1 (largest tolerance = factor × nominal), got {factor:g}")
+    grades = {}
+    if t.has("grades"):
+        gt = t.table("grades")
+        for n in list(gt.data):
+            if n not in sources:
+                raise ConfigError(f"[budget.grades]: {n!r} is not an error source; use one of {sorted(sources)}")
+            g = gt.table(n)
+            grades[n] = {"quantity": g.string("quantity", "F_r", choices=("f_pt", "F_p", "F_alpha", "F_beta", "F_r")),
+                         "factor": g.number("factor", 2.0, positive=True),
+                         "standard": g.string("standard", "1328-1:2013", choices=("1328-1:2013", "1328-1:1995")),
+                         "module": g.number("module_mm", positive=True), "diameter": g.number("diameter_mm", positive=True),
+                         "face_width": g.number("face_width_mm", positive=True) if g.has("face_width_mm") else None}
+            g.finish()
+        gt.finish()
+    specs = t.get("pareto_specs", [])
+    if not isinstance(specs, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0 for x in specs):
+        raise ConfigError("[budget] pareto_specs: expected a list of positive numbers (TE specs in the study's unit)")
+    spec_obj = BudgetSpec(spec=spec, constraint=constraint, target=target, samples=t.integer("samples", 4096, minimum=64),
+                          check_samples=t.integer("check_samples", 50_000, minimum=1000), costs=costs,
+                          maximum_um={n: factor * tolerances[n] for n in sources}, grades=grades, pareto_specs=tuple(float(x) for x in specs),
+                          compare_random_assembly=t.boolean("compare_random_assembly", True))
+    t.finish()
+    return spec_obj

@@ -216,3 +216,19 @@ class RelativePhase(AbstractPhase):
 
     def describe(self) -> str:
         return f"assembly rule: phase of {self.to} + {float(self.offset):.6g} rad ({math.degrees(float(self.offset)):.6g}°)"
+
+
+class Optimised(AbstractPhase):
+    """Placeholder phase for a study file: the phase is chosen by the allocation optimiser.
+
+    With `relative_to` the rule is ``phase = phase(relative_to) + offset`` (offset chosen);
+    without, the phase itself is chosen (an absolute assembly position).
+    """
+
+    relative_to: str | None = eqx.field(static=True)
+
+    def __init__(self, relative_to: str | None = None):
+        self.relative_to = relative_to
+
+    def describe(self) -> str:
+        return "chosen by the allocation optimiser" + (f" (offset from the phase of {self.relative_to})" if self.relative_to else " (absolute)")

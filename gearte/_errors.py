@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
-from ._distributions import AbstractMagnitude, AbstractPhase, Fixed, FixedPhase, RelativePhase
+from ._distributions import AbstractMagnitude, AbstractPhase, Fixed, FixedPhase, Optimised, RelativePhase
 
 
 class Eccentricity(eqx.Module):
@@ -51,10 +51,11 @@ def _order(sources: Mapping[str, ErrorSource]) -> list[str]:
             raise ValueError("phase rules form a cycle: " + " → ".join(chain + (name,)) + "; one phase must be random or fixed")
         state[name] = 1
         rule = sources[name].phase
-        if isinstance(rule, RelativePhase):
-            if rule.to not in sources:
-                raise ValueError(f"error source {name!r}: its phase rule refers to {rule.to!r}, which is not an error source here; use one of {sorted(sources)}")
-            visit(rule.to, chain + (name,))
+        ref = rule.to if isinstance(rule, RelativePhase) else rule.relative_to if isinstance(rule, Optimised) else None
+        if ref is not None:
+            if ref not in sources:
+                raise ValueError(f"error source {name!r}: its phase rule refers to {ref!r}, which is not an error source here; use one of {sorted(sources)}")
+            visit(ref, chain + (name,))
         state[name] = 2
         done.append(name)
 
@@ -102,6 +103,9 @@ class ErrorModel(eqx.Module):
             k_mag, k_ph = jax.random.split(jax.random.fold_in(key, names.index(name)))
             mag = src.magnitude.sample(k_mag, shape)
             rule = src.phase
+            if isinstance(rule, Optimised):
+                raise ValueError(f"error source {name!r}: its phase is to be chosen by the allocation optimiser; "
+                                 "resolve the rule first (gearte.allocate_rule, or a study file's [allocation])")
             if isinstance(rule, RelativePhase):
                 phase = jnp.broadcast_to(out[rule.to].phase, shape) + rule.offset
             else:

@@ -3,7 +3,9 @@
 Exact extrema (≤ 1e-6 relative, in practice ~1e-12): the signal is sampled on a
 grid of ``oversample`` points per period of its highest order; the best local
 maxima (ranked by the parabola through each grid maximum and its neighbours, one
-per half-period block) are refined by safeguarded Newton steps on the trigonometric polynomial itself. The
+per half-period block) are refined by safeguarded Newton steps on the trigonometric polynomial itself,
+round after round until a rigorous bound shows that no unrefined block can hold a
+better extremum. The
 search runs on stopped gradients; the value is then re-evaluated at the located
 angle, so by the envelope theorem its gradient is exact and finite, also at
 zero amplitude and at ties (where it is a valid subgradient).
@@ -106,19 +108,19 @@ def _top_indices(score: Array, c: int) -> Array:
     return jnp.stack(out, axis=-1)
 
 
-def _candidates(g: Array, sign: float, block: int, candidates: int) -> tuple[Array, Array]:
-    """Grid indices of the best maxima of ``sign · f`` and their parabola-vertex offsets (grid steps).
+def _block_scores(g: Array, sign: float, block: int) -> tuple[Array, Array, Array, Array]:
+    """Per block of the grid: its best point, the parabola-vertex offset there (grid steps),
+    the vertex value (for ranking) and the block's grid maximum (for certification).
 
-    `g` holds f on the grid with one wrap-around point at each end. The best grid point of
-    each block of half the shortest period is found first (a trigonometric polynomial of order
-    K has at most K maxima per period, so such a block rarely holds two); a parabola through
-    each block winner and its neighbours then ranks the blocks, and the best few are kept.
+    `g` holds f on the grid with one wrap-around point at each end. Blocks are half the
+    shortest period long: a trigonometric polynomial of order K has at most K maxima per
+    period, so a block rarely holds two.
     """
     f = sign * g[..., 1:-1]
     m = f.shape[-1]
     nb = m // block
     blocks = f.reshape(f.shape[:-1] + (nb, block))
-    idx = jnp.argmax(blocks, axis=-1) + block * jnp.arange(nb)  # (..., nb) grid index of each block's best
+    idx = jnp.argmax(blocks, axis=-1) + block * jnp.arange(nb)  # grid index of each block's best point
     fc = jnp.take_along_axis(f, idx, axis=-1)
     fp = sign * jnp.take_along_axis(g, idx, axis=-1)  # g is shifted by one: g[idx] = f[idx − 1]
     fn = sign * jnp.take_along_axis(g, idx + 2, axis=-1)
@@ -126,49 +128,93 @@ def _candidates(g: Array, sign: float, block: int, candidates: int) -> tuple[Arr
     denom = fp - 2.0 * fc + fn
     curved = denom < 0.0
     delta = jnp.where(curved, jnp.clip(0.5 * d1 / jnp.where(curved, denom, -1.0), -0.5, 0.5), 0.0)
-    is_max = (fc >= fp) & (fc >= fn)
-    score = jnp.where(is_max, fc - 0.25 * d1 * delta, -jnp.inf)
+    score = fc - 0.25 * d1 * delta
+    return idx, delta, score, fc
+
+
+def _candidates(g: Array, sign: float, block: int, candidates: int) -> tuple[Array, Array]:
+    """Grid indices and parabola-vertex offsets of the `candidates` best-ranked blocks (no certification)."""
+    idx, delta, score, _ = _block_scores(g, sign, block)
     best = _top_indices(score, candidates)
     return jnp.take_along_axis(idx, best, axis=-1), jnp.take_along_axis(delta, best, axis=-1)
 
 
 def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_steps: int) -> tuple[Array, Array]:
-    """τ of the maximum and of the minimum of the signal over [0, 2π)."""
+    """τ of the maximum and of the minimum of the signal over [0, 2π), certified.
+
+    Rounds of `candidates` blocks per direction, best-ranked first, are refined by Newton's
+    method until no unrefined block can hold a better extremum: the true maximum lies within
+    h/2 of a grid point and has f' = 0, so it exceeds that block's grid maximum by at most
+    h²/8 · max|f''| ≤ h²/8 · Σ k²|c_k|. One round settles almost every signal; near-ties
+    (e.g. a slow modulation of a fast pattern) take more.
+    """
     m = _grid_size(signal.orders, oversample)
     block = max(1, oversample // 2)
     h = _TWO_PI / m
     cos_b, sin_b = _basis(signal.orders, m, wrap=True)
     g = _grid_values(signal, cos_b, sin_b)
-    i_max, d_max = _candidates(g, 1.0, block, candidates)
-    i_min, d_min = _candidates(g, -1.0, block, candidates)
-    # The grid maximum is its own block's winner and is ranked at or above its grid value,
-    # so it is always a starting point unless better-ranked ones are.
-    idx = jnp.concatenate([i_max, i_min], axis=-1)
-    delta = jnp.concatenate([d_max, d_min], axis=-1)
-    n = i_max.shape[-1]
-    sign = jnp.concatenate([jnp.ones(n), -jnp.ones(n)])
-    tau = (idx.astype(delta.dtype) + delta) * h
-    # Safeguarded Newton steps on the polynomial itself, maxima and minima together. Every point
-    # visited is an exact evaluation and the best one wins, so a stray step cannot lose accuracy.
-    taus, gs = [], []
-    for step_no in range(newton_steps + 1):
-        fv, f1, f2 = _derivatives(signal, tau)
-        taus.append(tau)
-        gs.append(sign * fv)
-        if step_no == newton_steps:
-            break
-        concave = sign * f2 < 0.0
-        step = jnp.where(concave, -f1 / jnp.where(concave, f2, 1.0), 0.0)
-        tau = tau + jnp.clip(step, -h, h)
-    tau_all = jnp.stack(taus, axis=-2)  # (..., steps + 1, 2n)
-    g_all = jnp.stack(gs, axis=-2)
+    k = jnp.asarray(signal.orders, dtype=float)
+    margin = h * h / 8.0 * jnp.sum(k * k * jnp.sqrt(signal.cos_coef**2 + signal.sin_coef**2), axis=-1)
+    idx_x, d_x, s_x, top_x = _block_scores(g, 1.0, block)
+    idx_n, d_n, s_n, top_n = _block_scores(g, -1.0, block)
+    idx = jnp.concatenate([idx_x, idx_n], axis=-1)
+    delta = jnp.concatenate([d_x, d_n], axis=-1)
+    score = jnp.concatenate([s_x, s_n], axis=-1)
+    top = jnp.concatenate([top_x, top_n], axis=-1)
+    nb = idx_x.shape[-1]
+    c = min(candidates, nb)
+    sign_of = lambda sel: jnp.where(sel < nb, 1.0, -1.0)
 
-    def best(sl):
-        t = tau_all[..., sl].reshape(tau_all.shape[:-2] + (-1,))
-        v = g_all[..., sl].reshape(g_all.shape[:-2] + (-1,))
-        return jnp.take_along_axis(t, jnp.argmax(v, axis=-1)[..., None], axis=-1)[..., 0]
+    def refine(sel):
+        # Safeguarded Newton from the parabola vertex; every point visited is an exact evaluation
+        # and the best one wins, so a stray step cannot lose accuracy.
+        sgn = sign_of(sel)
+        tau = (jnp.take_along_axis(idx, sel, axis=-1).astype(delta.dtype) + jnp.take_along_axis(delta, sel, axis=-1)) * h
+        taus, vals = [], []
+        for step_no in range(newton_steps + 1):
+            fv, f1, f2 = _derivatives(signal, tau)
+            taus.append(tau)
+            vals.append(sgn * fv)
+            if step_no == newton_steps:
+                break
+            concave = sgn * f2 < 0.0
+            step = jnp.where(concave, -f1 / jnp.where(concave, f2, 1.0), 0.0)
+            tau = tau + jnp.clip(step, -h, h)
+        return jnp.stack(taus, axis=-1), jnp.stack(vals, axis=-1)  # (..., picks, steps + 1)
 
-    return best(slice(0, n)), best(slice(n, 2 * n))
+    def pick(remaining):
+        # The c best-ranked unrefined blocks of each direction.
+        def top_c(lo):
+            part = jnp.where(remaining[..., lo:lo + nb], score[..., lo:lo + nb], -jnp.inf)
+            return _top_indices(part, c) + lo
+        return jnp.concatenate([top_c(0), top_c(nb)], axis=-1)
+
+    def absorb(state, sel):
+        remaining, best_tau, best_val = state
+        taus, vals = refine(sel)
+        remaining = remaining & ~jnp.any(jnp.arange(2 * nb) == sel[..., :, None], axis=-2)
+        out_tau, out_val = [], []
+        for d, (lo, hi) in enumerate(((0, c), (c, 2 * c))):
+            t = taus[..., lo:hi, :].reshape(taus.shape[:-2] + (-1,))
+            v = vals[..., lo:hi, :].reshape(vals.shape[:-2] + (-1,))
+            j = jnp.argmax(v, axis=-1)
+            v_new = jnp.take_along_axis(v, j[..., None], axis=-1)[..., 0]
+            t_new = jnp.take_along_axis(t, j[..., None], axis=-1)[..., 0]
+            better = v_new > best_val[..., d]
+            out_tau.append(jnp.where(better, t_new, best_tau[..., d]))
+            out_val.append(jnp.where(better, v_new, best_val[..., d]))
+        return remaining, jnp.stack(out_tau, axis=-1), jnp.stack(out_val, axis=-1)
+
+    def uncertified(state):
+        remaining, _, best_val = state
+        bound = jnp.where(remaining, top, -jnp.inf) + margin[..., None]
+        return (jnp.max(bound[..., :nb], axis=-1) > best_val[..., 0]) | (jnp.max(bound[..., nb:], axis=-1) > best_val[..., 1])
+
+    batch = g.shape[:-1]
+    init = (jnp.ones(batch + (2 * nb,), dtype=bool), jnp.zeros(batch + (2,)), jnp.full(batch + (2,), -jnp.inf))
+    state = absorb(init, pick(init[0]))
+    state = jax.lax.while_loop(lambda st: jnp.any(uncertified(st)), lambda st: absorb(st, pick(st[0])), state)
+    return state[1][..., 0], state[1][..., 1]
 
 
 def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 3, newton_steps: int = 1) -> Extrema:

@@ -132,8 +132,8 @@ def monte_carlo(
       runs reuse the compiled code).
     - `key`: integer seed or `jax.random` key; sample i uses ``fold_in(key, i)``.
     - `n_samples`: number of samples (default 50,000).
-    - `chunk_size`: samples per compiled call (rounded up to whole blocks; default 16
-      blocks). Sets the progress-bar step; never changes the results.
+    - `chunk_size`: samples per compiled call (rounded up to whole blocks, at least two;
+      default 16 blocks). Sets the progress-bar step; never changes the results.
     - `block_size`: samples computed together in one vectorised block; bounds memory.
       Default: from ``fn.bytes_per_sample()`` (128 MiB per block), else 256. Results are
       bit-identical for any chunk size at a given block size; another block size may
@@ -155,8 +155,10 @@ def monte_carlo(
         per = fn.bytes_per_sample() if hasattr(fn, "bytes_per_sample") else None
         block_size = default_block_size(per) if per else 256
     block = int(block_size)
-    blocks_per_call = max(1, -(-int(chunk_size) // block)) if chunk_size is not None else 16
-    blocks_per_call = min(blocks_per_call, -(-n_samples // block))
+    # At least two blocks per call: XLA simplifies a loop of one trip into different code,
+    # which can round differently in the last bit.
+    blocks_per_call = max(2, -(-int(chunk_size) // block)) if chunk_size is not None else 16
+    blocks_per_call = max(2, min(blocks_per_call, -(-n_samples // block)))
     chunk = blocks_per_call * block
     n_calls = -(-n_samples // chunk)
     if progress is None:

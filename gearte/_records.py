@@ -122,23 +122,32 @@ class RecordSpectrum(eqx.Module):
     `freq_cpm` in cycles per minute; `amplitude` in rad (the record's unit), scaled by
     the window's coherent gain so that a sinusoid of amplitude A at a bin centre reads A
     (up to 15 % less between bins with the Hann window: read line amplitudes from
-    `spectral_lines`).
+    `spectral_lines`). `resolution_cpm` is the record's bin spacing (60 / duration);
+    with zero padding the points are `zero_pad` times denser than that.
     """
 
     freq_cpm: np.ndarray
     amplitude: np.ndarray
     window: str = eqx.field(static=True)
     resolution_cpm: float = eqx.field(static=True)
+    zero_pad: int = eqx.field(static=True)
 
 
-def record_spectrum(rec: Record, *, window: str = "hann") -> RecordSpectrum:
-    """Amplitude spectrum of a record (mean removed), with the window `"hann"` or `"rectangular"`."""
+def record_spectrum(rec: Record, *, window: str = "hann", zero_pad: int = 1) -> RecordSpectrum:
+    """Amplitude spectrum of a record (mean removed), with the window `"hann"` or `"rectangular"`.
+
+    `zero_pad` > 1 interpolates the spectrum (the record is padded with zeros to that many
+    times its length): the resolution does not change, but the window's side lobes, which
+    fall between the bins, become visible.
+    """
+    if isinstance(zero_pad, bool) or not isinstance(zero_pad, int) or not 1 <= zero_pad <= 64:
+        raise ValueError(f"zero_pad: must be a whole number in [1, 64], got {zero_pad!r}")
     x = np.asarray(rec.te, dtype=np.float64)
     w = _window(window, len(x))
-    X = np.fft.rfft((x - x.mean()) * w)
+    X = np.fft.rfft((x - x.mean()) * w, n=zero_pad * len(x))
     amp = 2.0 * np.abs(X) / w.sum()
-    freq = np.fft.rfftfreq(len(x), d=1.0 / rec.sample_rate_hz) * 60.0
-    return RecordSpectrum(freq_cpm=freq, amplitude=amp, window=window, resolution_cpm=rec.resolution_cpm)
+    freq = np.fft.rfftfreq(zero_pad * len(x), d=1.0 / rec.sample_rate_hz) * 60.0
+    return RecordSpectrum(freq_cpm=freq, amplitude=amp, window=window, resolution_cpm=rec.resolution_cpm, zero_pad=zero_pad)
 
 
 class SpectralLines(eqx.Module):
@@ -281,7 +290,7 @@ def spectrum_peaks(spec: RecordSpectrum, *, exclude_cpm: Sequence[float] = (), e
     f = np.asarray(spec.freq_cpm)
     is_peak = np.zeros(len(a), dtype=bool)
     is_peak[1:-1] = (a[1:-1] > a[:-2]) & (a[1:-1] >= a[2:])
-    is_peak[:2] = False
+    is_peak[:2 * spec.zero_pad] = False
     for c in exclude_cpm:
         is_peak &= np.abs(f - c) > exclude_bins * spec.resolution_cpm
     idx = np.nonzero(is_peak)[0]
@@ -289,20 +298,29 @@ def spectrum_peaks(spec: RecordSpectrum, *, exclude_cpm: Sequence[float] = (), e
     return [(float(f[i]), float(a[i])) for i in idx]
 
 
-def record_envelope(rec: Record, *, band_cpm: tuple[float, float]) -> np.ndarray:
+def record_envelope(rec: Record, *, band_cpm: tuple[float, float], taper: float = 0.1) -> np.ndarray:
     """Envelope (rad) of the part of a record between `band_cpm` = (low, high) cycles per minute.
 
     The modulus of the analytic signal of the band (FFT band-pass): for two lines a₁, a₂
     in the band it runs between |a₁ − a₂| and a₁ + a₂ at their difference frequency. The
-    FFT treats the record as periodic, so the first and last few periods of the lowest
-    frequency in the band are less accurate.
+    FFT treats the record as periodic; so that the jump between its end and its start
+    does not leak into the band, the record is first tapered to zero over a fraction
+    `taper` of its length at each end (a Tukey window). The envelope is exact to
+    ~1e-3 relative in the untapered middle and meaningless in the tapered ends.
     """
     lo, hi = (float(v) for v in band_cpm)
     if not 0.0 <= lo < hi:
         raise ValueError(f"band_cpm: need 0 ≤ low < high, got {band_cpm!r}")
+    if not 0.0 <= float(taper) < 0.5:
+        raise ValueError(f"taper: must be in [0, 0.5), got {taper!r}")
     x = np.asarray(rec.te, dtype=np.float64)
     n = len(x)
-    X = np.fft.fft(x - x.mean())
+    w = np.ones(n)
+    m = int(taper * n)
+    if m > 0:
+        ramp = 0.5 - 0.5 * np.cos(math.pi * np.arange(m) / m)
+        w[:m], w[n - m:] = ramp, ramp[::-1]
+    X = np.fft.fft((x - x.mean()) * w)
     f = np.fft.fftfreq(n, d=1.0 / rec.sample_rate_hz) * 60.0
     keep = (f >= lo) & (f <= hi)
     z = np.fft.ifft(np.where(keep, 2.0 * X, 0.0))

@@ -89,7 +89,7 @@ def _one_side(signal: TESignal, slow: TESignal, bc: Array, bs: Array, k_fast: in
         cos_b, sin_b = _basis(slow.orders, m, wrap=True)
         g = _grid_values(slow, cos_b, sin_b)
         idx, delta = _candidates(g, sign, block, candidates)
-        tau_s = (idx + delta) * h
+        tau_s = (idx.astype(delta.dtype) + delta) * h
         # Exact local extrema of the slow part (its own Newton steps, one per candidate).
         ts, vs = [], []
         for _ in range(3):

@@ -3,6 +3,7 @@
     gearte run CONFIG.toml --out DIR [--samples N] [--seed S] [--chunk-size C] [--progress/--no-progress]
     gearte compare RUN_DIR [RUN_DIR ...] --out DIR
     gearte check CONFIG.toml
+    gearte grade --standard {1328-1:2013,1328-1:1995} --module M --diameter D [--face-width B] [--teeth Z] --grade G
 """
 
 from __future__ import annotations
@@ -47,6 +48,14 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--out", required=True, help="folder for the comparison report")
     k = sub.add_parser("check", help="validate a study file without running it")
     k.add_argument("config")
+    g = sub.add_parser("grade", help="ISO 1328 tolerances (µm) of an accuracy grade, as JSON")
+    g.add_argument("--standard", required=True, choices=["1328-1:2013", "1328-1:1995"],
+                   help="ISO 1328-1:2013 (classes 1-11) or ISO 1328-1:1995/-2:1997 = GB/T 10095 (grades 0-12)")
+    g.add_argument("--module", required=True, type=float, help="normal module m, mm")
+    g.add_argument("--diameter", required=True, type=float, help="reference diameter d, mm")
+    g.add_argument("--face-width", type=float, help="face width b, mm (needed for F_beta; F_beta is null without it)")
+    g.add_argument("--teeth", type=int, help="number of teeth z (optional; range-checked only)")
+    g.add_argument("--grade", required=True, type=int, help="whole accuracy grade")
     return p
 
 
@@ -57,6 +66,25 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         with sigterm_as_interrupt():
+            if args.command == "grade":
+                import json
+
+                from ._iso1328 import iso1328_tolerances
+
+                tol = iso1328_tolerances(standard=args.standard, module=args.module, diameter=args.diameter,
+                                         face_width=args.face_width, grade=args.grade, teeth=args.teeth)
+                out = {"standard": args.standard, "grade": args.grade, "module_mm": args.module, "diameter_mm": args.diameter,
+                       "face_width_mm": args.face_width, "unit": "um"}
+                out.update({k: tol.get(k) for k in ("f_pt", "F_p", "F_alpha", "F_beta", "F_r")})
+                print(json.dumps(out, ensure_ascii=False))
+                return 0
+            if args.command in ("check", "run"):
+                from ._cycloid_run import DRIVE_TYPE, drive_type
+
+                if drive_type(args.config) == DRIVE_TYPE:  # the cycloid-pin reducer has its own study file and runner
+                    from ._cycloid_run import main_check, main_run
+
+                    return main_check(args.config) if args.command == "check" else main_run(args, argv)
             if args.command == "check":
                 study = load_study(args.config)
                 print(f"{args.config}: OK ({study.name}: {type(study.drive).__name__}, {len(study.errors.counts)} error sources, "

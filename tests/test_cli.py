@@ -15,7 +15,8 @@ from gearte import cli
 from gearte._config import ConfigError, load_study, parse_angle
 
 ROOT = Path(__file__).resolve().parents[1]
-EXAMPLES = sorted((ROOT / "examples").glob("planetary_*.toml"))
+# Plain Monte Carlo studies; allocation and budget studies have their own tests (test_allocation, test_budget).
+EXAMPLES = sorted(p for p in (ROOT / "examples").glob("planetary_*.toml") if not p.stem.endswith(("_allocate", "_budget")))
 RANDOM = ROOT / "examples" / "planetary_wang2013_random.toml"
 
 

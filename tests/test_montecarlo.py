@@ -26,8 +26,16 @@ def random_study():
 @settings(max_examples=8, deadline=None)
 @given(st.integers(1, 700))
 def test_results_do_not_depend_on_chunk_size(random_study, chunk):
-    a = gearte.monte_carlo(random_study, key=7, n_samples=1000, chunk_size=chunk).values
-    b = gearte.monte_carlo(random_study, key=7, n_samples=1000, chunk_size=1000).values
+    # Blocks of 64: chunks from one block per call to many, against one call for everything.
+    a = gearte.monte_carlo(random_study, key=7, n_samples=1000, chunk_size=chunk, block_size=64).values
+    b = gearte.monte_carlo(random_study, key=7, n_samples=1000, chunk_size=1024, block_size=64).values
+    np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("chunk", [1, 64, 65, 128, 1000])
+def test_one_block_and_many_blocks_per_call_agree_bitwise(random_study, chunk):
+    a = gearte.monte_carlo(random_study, key=11, n_samples=600, chunk_size=chunk, block_size=64).values
+    b = gearte.monte_carlo(random_study, key=11, n_samples=600, chunk_size=640, block_size=64).values
     np.testing.assert_array_equal(a, b)
 
 

@@ -1,0 +1,472 @@
+"""Assembly-phase allocation: choose how parts are turned at assembly to cut the TE.
+
+Two situations (seed 000, sections 1 and 3; spec planetary_2kh.md):
+
+- **Measured parts** (`allocate_measured`): every magnitude and manufacturing phase is
+  known; choose the adjustable phases that minimise the exact peak (or peak-to-peak).
+- **Unmeasured parts** (`allocate_rule`): only the tolerances are known; choose an
+  assembly *rule* — adjustable phases as offsets from a datum phase (the seed's β_r) or
+  as absolute values — that minimises the worst case over the unknown manufacturing
+  phases, the expected TE over them, or the expected TE when the magnitudes are random
+  too. The seed's collinear compensation (λ_i = ±1) is one candidate, not a limit: the
+  optimiser works on the true objective, where phasors may close a polygon.
+
+Optimisation runs on smooth surrogates with optimistix (BFGS, multi-start under
+`vmap`); every reported figure is the exact metric.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from ._distributions import FixedPhase, Optimised, RelativePhase, UniformPhase
+from ._errors import Eccentricity, ErrorModel
+from ._metrics import smooth_peak, te_metric
+from ._montecarlo import as_key
+from ._precision import require_x64
+from ._signal import Components, to_signal
+from .drives._base import AbstractDrive
+
+_TWO_PI = 2.0 * math.pi
+
+
+def _check_solver_results(results) -> int:
+    """Number of starts whose solver finished successfully (the rest are reported, not hidden)."""
+    return int(np.sum(np.asarray(results == optx.RESULTS.successful)))
+
+
+# ------------------------------------------------------------------ measured parts
+
+
+class MeasuredAllocation(eqx.Module):
+    """Result of `allocate_measured`.
+
+    `phases`: the chosen phase (rad) of every adjusted source; `te` and `te_before`: the
+    exact metric (rad) with the chosen and with the given phases; `starts`/`converged`: how
+    many optimiser starts ran and how many reported success; `enumerated`: whether the
+    discrete optimum was verified by enumerating every allowed combination.
+    """
+
+    phases: dict[str, Array]
+    te: Float[Array, ""]
+    te_before: Float[Array, ""]
+    metric: str = eqx.field(static=True)
+    starts: int = eqx.field(static=True)
+    converged: int = eqx.field(static=True)
+    enumerated: bool = eqx.field(static=True)
+
+
+def _with_phases(errors: Mapping[str, Eccentricity], names: list[str], counts: list[int], y: Array) -> dict[str, Eccentricity]:
+    out = dict(errors)
+    i = 0
+    for n, c in zip(names, counts):
+        out[n] = Eccentricity(jnp.broadcast_to(errors[n].magnitude, (c,)) if errors[n].magnitude.ndim else errors[n].magnitude, y[i:i + c] if c > 1 else y[i])
+        i += c
+    return out
+
+
+def allocate_measured(
+    drive: AbstractDrive,
+    errors: Mapping[str, Eccentricity],
+    *,
+    adjust: Mapping[str, float | None],
+    key: int | PRNGKeyArray,
+    metric: str = "peak",
+    starts: int = 16,
+    width: float | None = None,
+    max_steps: int = 200,
+    enumerate_limit: int = 20_000,
+) -> MeasuredAllocation:
+    """Choose the phases of the `adjust` sources that minimise the exact TE metric.
+
+    **Arguments:**
+
+    - `drive`, `errors`: the drive and its measured errors (magnitudes µm, phases rad).
+    - `adjust`: source name → step (rad) between allowed assembly positions (e.g. 2π/z
+      for a gear turned by whole teeth, 2π/n for an n-bolt pattern), or None for any angle.
+    - `key`: seed or key for the random starts.
+    - `metric`: "peak" or "peak_to_peak".
+    - `starts`: optimiser starts, run together under `vmap`.
+    - `width`: smoothing width of the surrogate, rad (default 0.2 % of the starting metric).
+    - `enumerate_limit`: with discrete positions, enumerate every combination when there are
+      at most this many, which certifies the discrete optimum.
+    """
+    require_x64()
+    if metric not in ("peak", "peak_to_peak"):
+        raise ValueError(f"metric: 'peak' or 'peak_to_peak', got {metric!r}")
+    counts_all = drive.error_sources
+    for n, step in adjust.items():
+        if n not in counts_all:
+            raise ValueError(f"adjust: {n!r} is not an error source of this drive; use one of {sorted(counts_all)}")
+        if step is not None and not (math.isfinite(step) and step > 0):
+            raise ValueError(f"adjust[{n!r}]: the step between positions must be > 0 rad, or None for any angle")
+    if not adjust:
+        raise ValueError("adjust: name at least one error source whose phase may be chosen")
+    errors = drive._checked(errors)
+    names = list(adjust)
+    counts = [counts_all[n] for n in names]
+    dim = sum(counts)
+    y_given = jnp.concatenate([errors[n].phase.reshape(-1) for n in names])
+
+    def exact(y):
+        return te_metric(drive.signal(_with_phases(errors, names, counts, y)), metric)
+
+    te_before = exact(y_given)
+    w = float(width) if width is not None else 2e-3 * max(float(te_before), 1e-12)
+
+    def surrogate(y, args):
+        sig = drive.signal(_with_phases(errors, names, counts, y))
+        if metric == "peak":
+            return smooth_peak(sig, width=w) / w
+        # Peak-to-peak: smooth max of f plus smooth max of −f.
+        pos = smooth_peak(eqx.tree_at(lambda s: s.offset, sig, sig.offset + 1e3 * w), width=w)
+        return (pos - 1e3 * w + smooth_peak(sig, width=w)) / w
+
+    y0 = _TWO_PI * jax.random.uniform(as_key(key), (starts, dim), dtype=float)
+    y0 = y0.at[0].set(y_given)
+    solver = optx.BFGS(rtol=1e-8, atol=1e-8)
+    sol = jax.vmap(lambda s: optx.minimise(surrogate, solver, s, None, max_steps=max_steps, throw=False))(y0)
+    values = jax.vmap(exact)(sol.value)
+    best = jnp.argmin(values)
+    y_best, te_best = sol.value[best], values[best]
+
+    steps = [adjust[n] for n in names for _ in range(counts_all[n])]
+    enumerated = False
+    if any(s is not None for s in steps):
+        y_best, te_best, enumerated = _discrete(exact, y_best, steps, enumerate_limit)
+    phases, i = {}, 0
+    for n, c in zip(names, counts):
+        phases[n] = jnp.mod(y_best[i:i + c], _TWO_PI) if c > 1 else jnp.mod(y_best[i], _TWO_PI)
+        i += c
+    return MeasuredAllocation(phases=phases, te=te_best, te_before=te_before, metric=metric, starts=starts,
+                              converged=_check_solver_results(sol.result), enumerated=enumerated)
+
+
+def _discrete(exact, y_cont, steps, limit):
+    """Snap to allowed positions; enumerate all of them when few enough, else search neighbours."""
+    grids = []
+    for y, s in zip(np.asarray(y_cont), steps):
+        if s is None:
+            grids.append(np.array([y]))
+        else:
+            n = max(1, int(round(_TWO_PI / s)))
+            grids.append(np.arange(n) * (_TWO_PI / n))
+    total = int(np.prod([len(g) for g in grids]))
+    f = jax.jit(jax.vmap(exact))
+    if total <= limit:
+        mesh = np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, len(grids))
+        vals = np.concatenate([np.asarray(f(jnp.asarray(mesh[i:i + 4096]))) for i in range(0, total, 4096)])
+        i = int(np.argmin(vals))
+        return jnp.asarray(mesh[i]), jnp.asarray(vals[i]), True
+    # Too many combinations: round, then coordinate descent over neighbouring positions.
+    y = np.array([g[np.argmin(np.abs(np.angle(np.exp(1j * (g - v)))))] for g, v in zip(grids, np.asarray(y_cont))])
+    best = float(exact(jnp.asarray(y)))
+    improved = True
+    while improved:
+        improved = False
+        for j, s in enumerate(steps):
+            if s is None:
+                continue
+            for d in (-1, 1):
+                cand = y.copy()
+                cand[j] = (cand[j] + d * s) % _TWO_PI
+                v = float(exact(jnp.asarray(cand)))
+                if v < best - 1e-15:
+                    y, best, improved = cand, v, True
+    return jnp.asarray(y), jnp.asarray(best), False
+
+
+# ------------------------------------------------------------------ unmeasured parts: assembly rules
+
+
+class RuleProblem(eqx.Module):
+    """An assembly-rule problem: which phases are unknown, which are chosen, and how.
+
+    Built by `rule_problem`. Free phases (the sources whose phase law is uniform) are the
+    unknown manufacturing phases; each adjusted source's phase is ``datum + offset``
+    ("relative") or ``offset`` ("absolute"); every other phase follows its own rule.
+    """
+
+    drive: AbstractDrive
+    model: ErrorModel
+    tolerances: dict[str, Array]
+    adjust: dict[str, str] = eqx.field(static=True)
+    datum: str = eqx.field(static=True)
+    free: tuple[tuple[str, int], ...] = eqx.field(static=True)
+
+    def phases(self, beta: Array, offsets: Array) -> dict[str, Array]:
+        """All phases for free phases `beta` (one per free instance) and rule `offsets`."""
+        counts = self.model.counts
+        out: dict[str, Array] = {}
+        free_index = {nm: i for i, nm in enumerate(self.free)}
+        adj = list(self.adjust)
+        for name in _rule_order(self):
+            c = counts[name]
+            if name in self.adjust:
+                k = adj.index(name)
+                off = offsets[k]
+                out[name] = jnp.broadcast_to(out[self.datum] + off if self.adjust[name] == "relative" else off, (c,))
+                continue
+            rule = self.model.sources[name].phase
+            if isinstance(rule, UniformPhase):
+                out[name] = jnp.stack([beta[free_index[(name, i)]] for i in range(c)])
+            elif isinstance(rule, RelativePhase):
+                out[name] = jnp.broadcast_to(out[rule.to], (c,)) + rule.offset
+            elif isinstance(rule, FixedPhase):
+                out[name] = jnp.broadcast_to(rule.value, (c,))
+            else:
+                raise ValueError(f"error source {name!r}: phase law {type(rule).__name__} cannot be used in an assembly-rule problem")
+        return out
+
+    def errors(self, magnitudes: Mapping[str, Array], beta: Array, offsets: Array) -> dict[str, Eccentricity]:
+        ph = self.phases(beta, offsets)
+        return {n: Eccentricity(jnp.broadcast_to(magnitudes[n], (self.model.counts[n],)), ph[n]) for n in self.model.counts}
+
+    def components_at_tolerance(self, beta: Array, offsets: Array) -> Components:
+        return self.drive.components(self.errors(self.tolerances, beta, offsets))
+
+
+def _rule_order(p: RuleProblem) -> list[str]:
+    deps = {}
+    for n in p.model.counts:
+        if n in p.adjust:
+            deps[n] = p.datum if p.adjust[n] == "relative" else None
+        else:
+            rule = p.model.sources[n].phase
+            deps[n] = rule.to if isinstance(rule, RelativePhase) else None
+    order: list[str] = []
+
+    def visit(n, seen=()):
+        if n in order:
+            return
+        if n in seen:
+            raise ValueError("phase rules form a cycle: " + " → ".join(seen + (n,)))
+        if deps[n] is not None:
+            visit(deps[n], seen + (n,))
+        order.append(n)
+
+    for n in p.model.counts:
+        visit(n)
+    return order
+
+
+def rule_problem(drive: AbstractDrive, model: ErrorModel, *, adjust: Mapping[str, str], datum: str,
+                 tolerances: Mapping[str, float]) -> RuleProblem:
+    """Set up an assembly-rule problem.
+
+    **Arguments:**
+
+    - `drive`, `model`: the drive and how its errors are drawn (uniform phases are the unknown
+      manufacturing phases).
+    - `adjust`: source → "relative" (phase = datum phase + offset) or "absolute" (phase = offset).
+    - `datum`: the source whose (unknown) phase is the assembly datum, e.g. "ring_manufacturing" (β_r).
+    - `tolerances`: µm per source: the magnitudes for the worst-case and expected objectives.
+    """
+    counts = model.counts
+    for n, mode in adjust.items():
+        if n not in counts:
+            raise ValueError(f"adjust: {n!r} is not an error source; use one of {sorted(counts)}")
+        if mode not in ("relative", "absolute"):
+            raise ValueError(f"adjust[{n!r}]: 'relative' (to the datum) or 'absolute', got {mode!r}")
+    if not adjust:
+        raise ValueError("adjust: name at least one error source whose assembly phase is chosen")
+    if datum not in counts or datum in adjust:
+        raise ValueError(f"datum: {datum!r} must be an error source that is not adjusted")
+    if not isinstance(model.sources[datum].phase, UniformPhase):
+        raise ValueError(f"datum: the phase of {datum!r} must be uniform (an unknown manufacturing phase)")
+    missing = [n for n in counts if n not in tolerances or tolerances[n] is None]
+    if missing:
+        raise ValueError(f"tolerances: give a tolerance (µm) for {missing}")
+    for n, t in tolerances.items():
+        if not (math.isfinite(float(t)) and float(t) >= 0):
+            raise ValueError(f"tolerances[{n!r}]: must be a finite number ≥ 0 µm, got {t!r}")
+    free = tuple((n, i) for n in counts if n not in adjust and isinstance(model.sources[n].phase, UniformPhase) for i in range(counts[n]))
+    return RuleProblem(drive=drive, model=model, tolerances={n: jnp.asarray(float(tolerances[n])) for n in counts},
+                       adjust=dict(adjust), datum=datum, free=free)
+
+
+def _groups(p: RuleProblem) -> tuple[np.ndarray, bool]:
+    """Which free phase each component follows (−1: none), and whether each group is one frequency."""
+    k = len(p.free)
+    beta0, off0 = jnp.zeros(k), jnp.zeros(len(p.adjust))
+    jac = np.asarray(jax.jacfwd(lambda b: p.components_at_tolerance(b, off0).phase)(beta0))
+    if jac.ndim == 1:
+        jac = jac[:, None]
+    nz = np.abs(jac) > 0.5
+    if np.any(nz.sum(axis=1) > 1):
+        raise ValueError("a TE component depends on more than one unknown phase; the worst case needs a numerical search")
+    group = np.where(nz.any(axis=1), np.argmax(nz, axis=1), -1)
+    freqs = p.components_at_tolerance(beta0, off0).freq
+    single = all(len({abs(freqs[j]) for j in np.nonzero(group == g)[0]}) <= 1 for g in range(k))
+    return group, single
+
+
+def _group_parts(p: RuleProblem, offsets: Array, group: np.ndarray) -> list:
+    comps = p.components_at_tolerance(jnp.zeros(len(p.free)), offsets)
+    parts = []
+    for g in range(-1, len(p.free)):
+        mask = jnp.asarray((group == g).astype(np.float64))
+        if not np.any(group == g):
+            continue
+        parts.append((g, to_signal(Components(comps.amplitude * mask, comps.phase, comps.freq, gain=comps.gain))))
+    return parts
+
+
+def worst_case(p: RuleProblem, offsets: Array, *, metric: str = "peak") -> Float[Array, ""]:
+    """Worst case of the exact peak over every unknown phase, magnitudes at the tolerances (rad).
+
+    Each unknown phase turns its own group of components; when every group is one frequency
+    (or a constant) each group can reach ± its amplitude at any instant, so the worst case is
+    exactly the fixed part's peak plus the sum of the groups' amplitudes (the seed's
+    sum-of-amplitudes, with each group's amplitude computed by phasor sum, exact).
+    """
+    if metric != "peak":
+        raise ValueError("worst_case: only the peak metric is supported")
+    group, single = _groups(p)
+    if not single:
+        raise ValueError("worst_case: an unknown phase drives components of several frequencies; use the expected objective")
+    return sum(te_metric(sig, "peak") for _, sig in _group_parts(p, jnp.asarray(offsets, dtype=float), group))
+
+
+def _smooth_worst_case(p: RuleProblem, offsets: Array, group: np.ndarray, width: float) -> Array:
+    total = 0.0
+    for g, sig in _group_parts(p, offsets, group):
+        if g < 0:
+            total = total + smooth_peak(sig, width=width)
+        else:
+            # One frequency: amplitude = |phasor sum|, smoothed at 0.
+            total = total + jnp.sum(jnp.sqrt(sig.cos_coef**2 + sig.sin_coef**2 + width**2)) + jnp.sqrt(sig.offset**2 + width**2)
+    return total
+
+
+def _samples(p: RuleProblem, key: PRNGKeyArray, n: int, robust: bool):
+    """Common random numbers: unknown phases (and, if `robust`, magnitudes) for n samples."""
+    k_b, k_m = jax.random.split(key)
+    beta = _TWO_PI * jax.random.uniform(k_b, (n, len(p.free)), dtype=float)
+    if robust:
+        mags = {}
+        for j, name in enumerate(p.model.counts):
+            mags[name] = p.model.sources[name].magnitude.sample(jax.random.fold_in(k_m, j), (n, p.model.counts[name]))
+    else:
+        mags = {name: jnp.broadcast_to(p.tolerances[name], (n, p.model.counts[name])) for name in p.model.counts}
+    return beta, mags
+
+
+class _RuleSample(eqx.Module):
+    """One Monte Carlo sample of a rule: unknown phases uniform, magnitudes at tolerance or drawn."""
+
+    problem: RuleProblem
+    offsets: Array
+    robust: bool = eqx.field(static=True)
+    metric: str = eqx.field(static=True)
+
+    def __call__(self, key):
+        p = self.problem
+        k_b, k_m = jax.random.split(key)
+        beta = _TWO_PI * jax.random.uniform(k_b, (len(p.free),), dtype=float)
+        if self.robust:
+            mags = {n: p.model.sources[n].magnitude.sample(jax.random.fold_in(k_m, j), (p.model.counts[n],))
+                    for j, n in enumerate(p.model.counts)}
+        else:
+            mags = p.tolerances
+        return te_metric(p.drive.signal(p.errors(mags, beta, self.offsets)), self.metric)
+
+
+def expected(p: RuleProblem, offsets: Array, *, key: int | PRNGKeyArray, n_samples: int = 50_000, robust: bool = False,
+             metric: str = "peak") -> Float[Array, ""]:
+    """Mean exact metric (rad) over uniform unknown phases, magnitudes at the tolerances
+    (or drawn by their laws if `robust`), by Monte Carlo with `n_samples` samples."""
+    from ._montecarlo import monte_carlo
+
+    fn = _RuleSample(p, jnp.asarray(offsets, dtype=float), robust, metric)
+    return jnp.mean(jnp.asarray(monte_carlo(fn, key=key, n_samples=n_samples, block_size=1024, progress=False).values))
+
+
+class RuleAllocation(eqx.Module):
+    """Result of `allocate_rule`: the chosen rule and its exact figures (rad).
+
+    `offsets`: source → offset (rad) from the datum ("relative") or absolute phase.
+    `worst_case`, `expected`, `robust`: the three objectives evaluated exactly (the last two
+    by Monte Carlo with `n_check` fresh samples); `objective`: which one was minimised.
+    """
+
+    offsets: dict[str, Array]
+    worst_case: Float[Array, ""]
+    expected: Float[Array, ""]
+    robust: Float[Array, ""]
+    objective: str = eqx.field(static=True)
+    starts: int = eqx.field(static=True)
+    converged: int = eqx.field(static=True)
+
+
+def evaluate_rule(p: RuleProblem, offsets: Mapping[str, float] | Array, *, key: int | PRNGKeyArray, n_check: int = 50_000) -> dict[str, Array]:
+    """Exact worst case, expected and robust TE (rad) of a rule (e.g. the seed's Table 3)."""
+    off = jnp.asarray([offsets[n] for n in p.adjust], dtype=float) if isinstance(offsets, Mapping) else jnp.asarray(offsets, dtype=float)
+    k1, k2 = jax.random.split(as_key(key))
+    return {"worst_case": worst_case(p, off), "expected": expected(p, off, key=k1, n_samples=n_check),
+            "robust": expected(p, off, key=k2, n_samples=n_check, robust=True)}
+
+
+def allocate_rule(
+    p: RuleProblem,
+    *,
+    objective: str = "worst_case",
+    key: int | PRNGKeyArray,
+    starts: int = 16,
+    n_samples: int = 512,
+    n_check: int = 50_000,
+    width: float | None = None,
+    max_steps: int = 300,
+) -> RuleAllocation:
+    """Find the assembly rule that minimises `objective` over the unknown phases.
+
+    **Arguments:**
+
+    - `p`: the problem (`rule_problem`).
+    - `objective`: "worst_case" (magnitudes at the tolerances, worst unknown phases),
+      "expected" (magnitudes at the tolerances, mean over uniform unknown phases) or
+      "robust" (magnitudes drawn by their laws too, e.g. Rayleigh within the tolerance).
+    - `key`: seed or key (starts, common random numbers, the final check).
+    - `starts`: optimiser starts under `vmap`.
+    - `n_samples`: common random samples in the expected/robust surrogates.
+    - `n_check`: fresh Monte Carlo samples for the exact expected/robust figures.
+    - `width`: surrogate smoothing width, rad (default 0.2 % of the worst case at zero offsets).
+    """
+    require_x64()
+    if objective not in ("worst_case", "expected", "robust"):
+        raise ValueError(f"objective: 'worst_case', 'expected' or 'robust', got {objective!r}")
+    k_start, k_crn, k_check = jax.random.split(as_key(key), 3)
+    m = len(p.adjust)
+    group, single = _groups(p)
+    if objective == "worst_case" and not single:
+        raise ValueError("objective 'worst_case' needs every unknown phase to drive one frequency; use 'expected'")
+    scale = float(worst_case(p, jnp.zeros(m))) if single else 1e-4
+    w = float(width) if width is not None else 2e-3 * max(scale, 1e-12)
+    beta, mags = _samples(p, k_crn, n_samples, robust=(objective == "robust"))
+
+    def surrogate(y, args):
+        if objective == "worst_case":
+            return _smooth_worst_case(p, y, group, w) / w
+        vals = jax.vmap(lambda b, mg: smooth_peak(p.drive.signal(p.errors(mg, b, y)), width=w))(beta, mags)
+        return jnp.mean(vals) / w
+
+    y0 = _TWO_PI * jax.random.uniform(k_start, (starts, m), dtype=float)
+    solver = optx.BFGS(rtol=1e-9, atol=1e-9)
+    sol = jax.vmap(lambda s: optx.minimise(surrogate, solver, s, None, max_steps=max_steps, throw=False))(y0)
+    if objective == "worst_case":
+        scores = jnp.stack([worst_case(p, y) for y in sol.value])
+    else:
+        scores = jax.vmap(lambda y: surrogate(y, None))(sol.value)
+    y_best = jnp.mod(sol.value[jnp.argmin(scores)], _TWO_PI)
+    figures = evaluate_rule(p, y_best, key=k_check, n_check=n_check)
+    return RuleAllocation(offsets={n: y_best[i] for i, n in enumerate(p.adjust)}, worst_case=figures["worst_case"],
+                          expected=figures["expected"], robust=figures["robust"], objective=objective, starts=starts,
+                          converged=_check_solver_results(sol.result))

@@ -1,0 +1,177 @@
+"""Assembly-phase allocation: known optima, independent re-evaluation, the seed's rule, study files."""
+
+import json
+import math
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gearte
+from gearte import cli
+from gearte._allocation import allocate_measured, allocate_rule, evaluate_rule, expected, rule_problem, worst_case
+from gearte._config import ConfigError, load_study
+from gearte.drives import ExplicitDrive, ExplicitTerm, wang2013
+from helpers import reference_extrema
+
+ROOT = Path(__file__).resolve().parents[1]
+ARCSEC = 180 * 3600 / math.pi
+GAIN = 1e-5  # rad/µm
+
+
+def explicit(*terms):
+    return ExplicitDrive([ExplicitTerm(s, f, offset=o) for s, f, o in terms], gain=GAIN)
+
+
+def test_two_equal_frequency_components_cancel_to_the_difference():
+    d = explicit(("a", 1, 0.0), ("b", 1, 0.0))
+    errs = {"a": gearte.Eccentricity(5.0, 0.3), "b": gearte.Eccentricity(3.0, 0.3)}
+    r = allocate_measured(d, errs, adjust={"b": None}, key=0, starts=4)
+    np.testing.assert_allclose(float(r.te), 2.0 * GAIN, rtol=1e-6)  # |A1 − A2|
+    np.testing.assert_allclose(float(r.te_before), 8.0 * GAIN, rtol=1e-9)
+    np.testing.assert_allclose(np.cos(float(r.phases["b"]) - 0.3), -1.0, atol=1e-6)  # phase difference π
+    assert r.converged >= 1
+
+
+def test_three_phasors_that_can_close_a_triangle_cancel_completely():
+    d = explicit(("a", 2, 0.0), ("b", 2, 0.0), ("c", 2, 0.0), ("d", 5, 0.0))
+    errs = {"a": gearte.Eccentricity(3.0, 0.0), "b": gearte.Eccentricity(4.0, 1.0), "c": gearte.Eccentricity(5.0, 2.0),
+            "d": gearte.Eccentricity(1.0, 0.7)}
+    r = allocate_measured(d, errs, adjust={"b": None, "c": None}, key=1, starts=8)
+    # The frequency-2 group closes (3-4-5 triangle); only the frequency-5 term is left.
+    np.testing.assert_allclose(float(r.te), 1.0 * GAIN, rtol=1e-4)
+
+
+def test_reported_te_re_evaluated_independently():
+    d = wang2013.table1_drive()
+    rng = np.random.default_rng(0)
+    errs = {k: gearte.Eccentricity(v * rng.uniform(0.5, 1.0), rng.uniform(0, 2 * math.pi)) for k, v in wang2013.TABLE1_TOLERANCES_UM.items()}
+    r = allocate_measured(d, errs, adjust={"sun_assembly": None, "carrier_assembly": None}, key=2, starts=8)
+    assert float(r.te) < float(r.te_before)
+    used = dict(errs) | {k: gearte.Eccentricity(errs[k].magnitude, r.phases[k]) for k in r.phases}
+    comps = d.components(used)
+    amps = np.asarray(comps.amplitude * comps.gain)
+    ref_max, ref_min = reference_extrema(amps, np.asarray(comps.phase), comps.freq)
+    np.testing.assert_allclose(float(r.te), max(ref_max, -ref_min), rtol=1e-8)
+
+
+def test_discrete_positions_are_verified_by_enumeration():
+    d = explicit(("a", 1, 0.0), ("b", 1, 0.0), ("c", 3, 0.0))
+    errs = {"a": gearte.Eccentricity(5.0, 0.3), "b": gearte.Eccentricity(4.0, 0.0), "c": gearte.Eccentricity(2.0, 0.0)}
+    r = allocate_measured(d, errs, adjust={"b": 2 * math.pi / 12, "c": 2 * math.pi / 8}, key=3, starts=4)
+    assert r.enumerated
+    # Brute force in NumPy over all 12 × 8 positions.
+    th = np.linspace(0, 2 * math.pi, 20001)
+    best = min(np.max(np.abs(5 * np.sin(th + 0.3) + 4 * np.sin(th + i * math.pi / 6) + 2 * np.sin(3 * th + j * math.pi / 4)))
+               for i in range(12) for j in range(8))
+    np.testing.assert_allclose(float(r.te) / GAIN, best, rtol=1e-6)
+    assert np.isclose(float(r.phases["b"]) % (math.pi / 6), 0, atol=1e-12) or np.isclose(float(r.phases["b"]) % (math.pi / 6), math.pi / 6)
+
+
+@pytest.fixture(scope="module")
+def seed_problem():
+    s = load_study(ROOT / "examples" / "planetary_wang2013_allocate.toml")
+    return rule_problem(s.drive, s.errors, adjust=s.allocation.adjust, datum=s.allocation.datum, tolerances=s.tolerances_um)
+
+
+def test_seed_rule_worst_case_is_the_papers_131_5(seed_problem):
+    seed = {"sun_assembly": 7 * math.pi / 9, "carrier_assembly": 8 * math.pi / 9, "planet_assembly": 0.0}
+    off = jnp.asarray([seed[n] for n in seed_problem.adjust])
+    assert round(float(worst_case(seed_problem, off)) * ARCSEC, 1) == 131.5
+
+
+def test_optimal_rule_closes_the_eighth_order_triangle(seed_problem):
+    r = allocate_rule(seed_problem, objective="worst_case", key=0, starts=6, n_check=2000)
+    k = ARCSEC / (48000 * math.cos(math.pi / 9))
+    # 21, 12 and 28.19 µm satisfy the triangle inequality: the ω_s/8 group can vanish, leaving
+    # 13 µm (7/8) + 10.94 µm (7/24): what collinear compensation (λ = ±1) cannot reach.
+    pair = abs(16 * np.exp(8j * math.pi / 9) + 16 * np.exp(1j * math.pi / 9))
+    np.testing.assert_allclose(float(r.worst_case) * ARCSEC, (13 + pair) * k, rtol=1e-6)
+    assert float(r.worst_case) * ARCSEC < 131.4
+    assert r.converged >= 1
+    # Worst case exact: a brute-force search over the unknown phases never exceeds it and comes close.
+    off = jnp.asarray([float(r.offsets[n]) for n in seed_problem.adjust])
+    rng = np.random.default_rng(5)
+    vals = [float(gearte.peak(seed_problem.drive.signal(seed_problem.errors(seed_problem.tolerances, jnp.asarray(b), off))))
+            for b in rng.uniform(0, 2 * math.pi, (300, len(seed_problem.free)))]
+    assert max(vals) <= float(r.worst_case) * (1 + 1e-9)
+    assert max(vals) > 0.9 * float(r.worst_case)
+
+
+def test_expected_against_a_plain_numpy_monte_carlo():
+    d = explicit(("a", 1, 0.0), ("b", 3, 0.0), ("c", 3, 0.0))
+    model = gearte.ErrorModel({"a": gearte.ErrorSource(4.0, gearte.UniformPhase()),
+                               "b": gearte.ErrorSource(3.0, gearte.UniformPhase()),
+                               "c": gearte.ErrorSource(2.0, gearte.FixedPhase(0.0))}, d.error_sources)
+    p = rule_problem(d, model, adjust={"c": "relative"}, datum="b", tolerances={"a": 4.0, "b": 3.0, "c": 2.0})
+    got = float(expected(p, jnp.asarray([math.pi / 2]), key=1, n_samples=20_000)) / GAIN
+    # NumPy: phases of a and b uniform, c = b + π/2 → frequency-3 amplitude |3 + 2i| = √13.
+    rng = np.random.default_rng(2)
+    th = np.linspace(0, 2 * math.pi, 4001)
+    ref = np.mean([np.max(np.abs(4 * np.sin(th + ba) + math.sqrt(13) * np.sin(3 * th + bb)))
+                   for ba, bb in rng.uniform(0, 2 * math.pi, (4000, 2))])
+    np.testing.assert_allclose(got, ref, rtol=0.01)
+    np.testing.assert_allclose(float(worst_case(p, jnp.asarray([math.pi / 2]))) / GAIN, 4 + math.sqrt(13), rtol=1e-9)
+
+
+def test_rule_problem_validation():
+    d = explicit(("a", 1, 0.0), ("b", 1, 0.0))
+    model = gearte.ErrorModel({"a": gearte.ErrorSource(1.0, gearte.UniformPhase()), "b": gearte.ErrorSource(1.0, gearte.FixedPhase(0.0))},
+                              d.error_sources)
+    with pytest.raises(ValueError, match="not an error source"):
+        rule_problem(d, model, adjust={"z": "relative"}, datum="a", tolerances={"a": 1, "b": 1})
+    with pytest.raises(ValueError, match="'relative'"):
+        rule_problem(d, model, adjust={"b": "sideways"}, datum="a", tolerances={"a": 1, "b": 1})
+    with pytest.raises(ValueError, match="uniform"):
+        rule_problem(d, model, adjust={"a": "relative"}, datum="b", tolerances={"a": 1, "b": 1})
+    with pytest.raises(ValueError, match="tolerance"):
+        rule_problem(d, model, adjust={"b": "relative"}, datum="a", tolerances={"a": 1})
+    with pytest.raises(ValueError, match="≥ 0"):
+        rule_problem(d, model, adjust={"b": "relative"}, datum="a", tolerances={"a": 1, "b": -1})
+    with pytest.raises(ValueError, match="objective"):
+        allocate_rule(rule_problem(d, model, adjust={"b": "relative"}, datum="a", tolerances={"a": 1, "b": 1}), objective="best", key=0)
+    with pytest.raises(ValueError, match="adjust"):
+        allocate_measured(d, {"a": gearte.Eccentricity(1.0), "b": gearte.Eccentricity(1.0)}, adjust={}, key=0)
+    with pytest.raises(ValueError, match="step"):
+        allocate_measured(d, {"a": gearte.Eccentricity(1.0), "b": gearte.Eccentricity(1.0)}, adjust={"b": -1.0}, key=0)
+
+
+def test_unresolved_placeholder_cannot_be_sampled():
+    s = load_study(ROOT / "examples" / "planetary_wang2013_allocate.toml")
+    import jax
+
+    with pytest.raises(ValueError, match="allocation optimiser"):
+        s.errors.sample(jax.random.key(0))
+
+
+def test_allocate_example_through_gearte_run(tmp_path):
+    cfg = tmp_path / "a.toml"
+    text = (ROOT / "examples" / "planetary_wang2013_allocate.toml").read_text()
+    cfg.write_text(text.replace("check_samples = 50000", "check_samples = 2000").replace("starts = 16 ", "starts = 4 "))
+    out = tmp_path / "out"
+    assert cli.main(["run", str(cfg), "--out", str(out), "--samples", "2000"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    a = s["allocation"]
+    assert set(a["phases_rad"]) == {"gamma_s", "gamma_c", "gamma_p"}
+    assert a["te_worst_case_arcsec"] < a["seed_rule_te_worst_case_arcsec"]
+    assert round(a["seed_rule_te_worst_case_arcsec"], 1) == 131.5
+    for k in ("te_expected_arcsec", "seed_rule_te_expected_arcsec"):
+        assert 50 < a[k] < 200
+    assert s["te"]["n"] == 2000 and s["te"]["metric"] == "peak"
+    for f in ("allocation_histograms.png", "allocation_traces.png"):
+        assert (out / f).exists()
+    assert "Assembly-phase allocation" in (out / "report.md").read_text()
+
+
+@pytest.mark.parametrize("edit,match", [
+    (lambda t: t.replace("[allocation]\n", "[unused_allocation]\n").replace("[allocation.seed_rule]", "[unused_allocation.seed_rule]"), "add an [allocation] table"),
+    (lambda t: t.replace('objective = "worst_case"', 'objective = "cheapest"'), "objective: must be one of"),
+    (lambda t: t.replace('datum = "ring_manufacturing"', 'datum = "sun_assembly"'), "differs from"),
+    (lambda t: t.replace('sun_assembly_rad = "7pi/9"\n', ""), "missing `sun_assembly_deg`"),
+])
+def test_bad_allocation_configs(edit, match, tmp_path):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(edit((ROOT / "examples" / "planetary_wang2013_allocate.toml").read_text()))
+    with pytest.raises(ConfigError, match=match.replace("[", r"\[")):
+        load_study(cfg)

@@ -1,0 +1,144 @@
+"""Tolerance budgets: smooth statistic, homogeneity, gradients, verified yield, infeasibility, study files."""
+
+import json
+import math
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.test_util import check_grads
+from scipy import stats as sps
+
+import gearte
+from gearte import cli
+from gearte._budget import _draws, budget_problem, contributions, optimise_budget, smooth_quantile, statistic, te_samples, uniform_scaling
+from gearte._config import ConfigError, load_study
+from gearte.drives import ExplicitDrive, ExplicitTerm
+
+ROOT = Path(__file__).resolve().parents[1]
+GAIN = 1e-5
+
+
+def two_source_problem(spec=20 * GAIN, target=0.99, **kw):
+    d = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 3)], gain=GAIN)
+    law = lambda t: gearte.Rayleigh(t / 2, truncate_at=t)
+    model = gearte.ErrorModel({"a": gearte.ErrorSource(law(10.0), gearte.UniformPhase()),
+                               "b": gearte.ErrorSource(law(10.0), gearte.UniformPhase())}, d.error_sources)
+    # b costs four times as much to tighten: the budget should tighten a more.
+    costs = {"a": gearte.Reciprocal(0.0, 10.0), "b": gearte.Reciprocal(0.0, 40.0)}
+    return budget_problem(d, model, costs=costs, nominal={"a": 10.0, "b": 10.0}, spec=spec, target=target, **kw)
+
+
+def test_smooth_quantile_tends_to_the_empirical_one_and_has_exact_gradients():
+    x = jnp.asarray(np.random.default_rng(0).normal(size=4001))
+    np.testing.assert_allclose(smooth_quantile(x, 0.95, 1e-4), np.quantile(x, 0.95), atol=2e-3)
+    g = jax.grad(lambda v: smooth_quantile(v, 0.9, 0.05))(x)
+    np.testing.assert_allclose(float(jnp.sum(g)), 1.0, rtol=1e-12)  # shifting every sample shifts the quantile
+    assert float(jnp.min(g)) >= 0
+    check_grads(lambda v: smooth_quantile(v, 0.9, 0.05), (x[:200],), order=1, modes=["rev"], eps=1e-6, atol=1e-7, rtol=1e-5)
+    # A width that depends on the data (as the budget's does) is differentiated through as well.
+    check_grads(lambda v: smooth_quantile(v, 0.9, 0.02 * jnp.mean(jnp.abs(v))), (x[:200],), order=1, modes=["rev"], eps=1e-6, atol=1e-7, rtol=1e-5)
+    # ... and then the smoothed quantile is homogeneous: q(s·x) = s·q(x).
+    xp = jnp.abs(x)
+    np.testing.assert_allclose(smooth_quantile(3.0 * xp, 0.9, 0.02 * jnp.mean(3.0 * xp)), 3.0 * smooth_quantile(xp, 0.9, 0.02 * jnp.mean(xp)), rtol=1e-12)
+
+
+def test_te_is_homogeneous_in_the_tolerances_and_contributions_add_up():
+    p = two_source_problem()
+    draws = _draws(p, jax.random.key(1), 2000)
+    t = {"a": jnp.asarray(4.0), "b": jnp.asarray(7.0)}
+    np.testing.assert_allclose(te_samples(p, {k: 2.5 * v for k, v in t.items()}, draws), 2.5 * te_samples(p, t, draws), rtol=1e-12)
+    c = contributions(p, {"a": 4.0, "b": 7.0}, key=1, n_samples=2000)
+    # Euler's theorem for a degree-1 homogeneous statistic.
+    np.testing.assert_allclose(sum(c.values()), float(statistic(p, te_samples(p, t, draws))), rtol=1e-9)
+
+
+def test_gradient_of_the_monte_carlo_statistic_against_finite_differences():
+    p = two_source_problem()
+    draws = _draws(p, jax.random.key(2), 3000)
+    f = lambda ta, tb: statistic(p, te_samples(p, {"a": ta, "b": tb}, draws))
+    check_grads(f, (jnp.asarray(6.0), jnp.asarray(3.0)), order=1, modes=["rev"], eps=1e-5, atol=1e-10, rtol=1e-4)
+
+
+def test_single_source_budget_matches_the_closed_form():
+    # One Rayleigh source (scale T/2, truncated at T), one frequency: peak TE = g·T·u exactly, so
+    # the 99 % yield at spec needs T = spec / (g · q₀.₉₉(u)), with u's quantile known in closed form.
+    d = ExplicitDrive([ExplicitTerm("a", 1)], gain=GAIN)
+    model = gearte.ErrorModel({"a": gearte.ErrorSource(gearte.Rayleigh(5.0, truncate_at=10.0), gearte.UniformPhase())}, d.error_sources)
+    p = budget_problem(d, model, costs={"a": gearte.Reciprocal(0.0, 1.0)}, nominal={"a": 10.0}, spec=20 * GAIN, target=0.99)
+    r = optimise_budget(p, key=0, n_samples=2000, n_check=40_000)
+    cdf1 = sps.rayleigh(scale=0.5).cdf(1.0)
+    q = sps.rayleigh(scale=0.5).ppf(0.99 * cdf1)  # quantile of u = magnitude / T
+    assert r.tolerances["a"] == pytest.approx(20.0 / q, rel=0.01)
+    assert r.verified_yield >= 0.99
+
+
+def test_optimised_budget_is_cheaper_and_meets_the_yield_on_a_fresh_seed():
+    p = two_source_problem()
+    r = optimise_budget(p, key=3, n_samples=2000, n_check=40_000)
+    b = uniform_scaling(p, key=3, n_check=40_000)
+    assert r.verified_yield >= 0.99 and b.verified_yield >= 0.99
+    assert r.verified_samples == 40_000
+    assert r.cost < 0.97 * b.cost
+    assert r.tolerances["a"] < r.tolerances["b"]  # the cheaper source is tightened
+    # Fresh seed, independent of everything above.
+    draws = _draws(p, jax.random.key(99), 40_000)
+    x = np.asarray(te_samples(p, {k: jnp.asarray(v) for k, v in r.tolerances.items()}, draws))
+    assert np.mean(x <= float(p.spec)) >= 0.99 - 3 * math.sqrt(0.99 * 0.01 / 40_000)
+
+
+def test_bad_budget_inputs():
+    with pytest.raises(ValueError, match="spec"):
+        two_source_problem(spec=-1.0)
+    with pytest.raises(ValueError, match="yield"):
+        two_source_problem(target=1.2)
+    with pytest.raises(ValueError, match="nominal"):
+        budget_problem(two_source_problem().drive, two_source_problem().model, costs=two_source_problem().costs, nominal={"a": 10.0, "b": 0.0}, spec=1e-4)
+    with pytest.raises(ValueError, match="costs"):
+        budget_problem(two_source_problem().drive, two_source_problem().model, costs={"a": gearte.Reciprocal(0, 1)}, nominal={"a": 1, "b": 1}, spec=1e-4)
+    with pytest.raises(ValueError, match="minimum"):
+        two_source_problem(minimum={"a": -1.0})
+    with pytest.raises(ValueError, match="infeasible spec"):
+        optimise_budget(two_source_problem(spec=1 * GAIN, minimum={"a": 5.0, "b": 5.0}), key=0, n_samples=500, n_check=2000)
+    with pytest.raises(ValueError, match="> 0"):
+        gearte.Reciprocal(0.0, 1.0)(jnp.asarray(-1.0))
+
+
+def test_budget_example_through_gearte_run(tmp_path):
+    text = (ROOT / "examples" / "planetary_wang2013_budget.toml").read_text()
+    text = (text.replace("samples = 4096 ", "samples = 512 ").replace("check_samples = 50000", "check_samples = 5000")
+            .replace("pareto_specs = [90.0, 105.0, 120.0, 140.0, 160.0]", "pareto_specs = [110.0, 140.0]"))
+    cfg = tmp_path / "b.toml"
+    cfg.write_text(text)
+    out = tmp_path / "out"
+    assert cli.main(["run", str(cfg), "--out", str(out), "--samples", "3000"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    b = s["budget"]
+    for k in ("tolerances_um", "grades", "cost", "baseline_cost", "spec_arcsec", "target_yield", "verified_yield", "verified_samples"):
+        assert k in b, k
+    assert b["spec_arcsec"] == 120.0 and b["verified_samples"] == 5000
+    assert b["cost"] < b["baseline_cost"]
+    assert set(b["grades"]) == {"sun_manufacturing", "planet_manufacturing", "ring_manufacturing"}
+    # The Table 3 rule cancels the planet assembly error, so its tolerance may go to the cap.
+    assert b["tolerances_um"]["planet_assembly"] == pytest.approx(80.0)
+    assert b["random_assembly"]["tolerances_um"]["planet_assembly"] < 8.0
+    assert len(b["pareto"]) == 2
+    assert s["te"]["percentiles"]["99.73"] < 130.0
+    for f in ("pareto.png", "contributions.png"):
+        assert (out / f).exists()
+
+
+@pytest.mark.parametrize("edit,match", [
+    (lambda t: t.replace("spec = 120.0 ", "spec = -5.0 "), r"\[budget\] spec: must be > 0"),
+    (lambda t: t.replace("target = 0.9973", "target = 1.5"), "a yield in"),
+    (lambda t: t.replace('cost_model = "reciprocal"', 'cost_model = "linear"'), "cost_model: must be one of"),
+    (lambda t: t.replace("tolerance_um = 13", "tolerance_um = 0"), r"\[errors.sun_manufacturing.magnitude\] truncate_at_tolerance: the tolerance is 0"),
+    (lambda t: t.replace("maximum_factor = 10.0", "maximum_factor = 0.5"), "maximum_factor"),
+])
+def test_bad_budget_configs(edit, match, tmp_path):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(edit((ROOT / "examples" / "planetary_wang2013_budget.toml").read_text()))
+    with pytest.raises(ConfigError, match=match):
+        load_study(cfg)

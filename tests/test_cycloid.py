@@ -1,0 +1,465 @@
+"""Cycloid-pin reducer (seed 003): geometry, clearances, Monte Carlo, sensitivities, optimiser, `gearte run`."""
+
+import json
+import math
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import brentq, minimize_scalar
+
+import gearte
+from gearte import cli
+from gearte._distributions import Uniform, UniformPhase
+from gearte.drives import cycloid_pin as cp
+from gearte.drives.cycloid_pin import (CycloidErrors, CycloidModification, CycloidPin, clearances, first_order_clearance,
+                                       loaded_pairs, normal_clearance, pitch_angles, revolution_angles, smooth_loaded_pairs,
+                                       sweep, tooth_profile)
+from gearte.drives.cycloid_pin_optimise import optimise_modification
+from gearte.drives.cycloid_pin_studies import (CycloidStudy, CycloidTolerances, Exactly, SignedUniform, Sinusoid, sensitivities,
+                                               tolerance_sensitivities, unit_metrics)
+
+ROOT = Path(__file__).resolve().parents[1]
+ARCSEC = 180 * 3600 / math.pi
+ARCMIN = 180 * 60 / math.pi
+
+
+def basic(**kw) -> CycloidPin:
+    """The seed's stage: z_b = 26, R = 195 mm, r = 13.5 mm, a = 6 mm (K_1 = 0.8)."""
+    return CycloidPin(26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, **kw)
+
+
+def seed_errors(za: int = 25) -> CycloidErrors:
+    """The error values of the seed's figures 3–8 (spec cycloid_pin.md)."""
+    return CycloidErrors(pin_circle_radius=14.0, pin_radius=-25.0, setup_eccentricity=31.5, setup_phase=math.radians(45),
+                         eccentricity=20.0, mandrel_runout=5.0, dressing_x=2.0, dressing_y=2.0, disc_offset=57.5,
+                         disc_offset_phase=math.radians(40), pin_wheel_offset=17.3, pin_wheel_offset_phase=math.radians(10),
+                         indexing=30 / ARCSEC * np.sin(2 * np.pi * np.arange(1, za + 1) / za))
+
+
+def flank_parameter(drive, theta_T):
+    """Each pin's angle from the crank direction, wrapped to [−π, π) (an independent restatement)."""
+    psi = theta_T + 2 * np.pi * np.arange(drive.z_pins) / drive.z_pins
+    return (psi + np.pi) % (2 * np.pi) - np.pi
+
+
+# ---------------------------------------------------------------- the error-free profile
+
+
+@pytest.mark.parametrize("z_pins, R, r, a", [(26, 195.0, 13.5, 6.0), (12, 80.0, 6.0, 3.0), (40, 150.0, 5.0, 2.5)])
+@pytest.mark.parametrize("theta_T", [0.1, 0.77, 2.0])
+def test_unmodified_error_free_profile_touches_every_pin(z_pins, R, r, a, theta_T):
+    d = CycloidPin(z_pins, pin_circle_radius=R, pin_radius=r, eccentricity=a)
+    c = clearances(d, None, theta_T)
+    assert bool(jnp.all(c.converged))
+    np.testing.assert_allclose(np.asarray(c.normal_clearance), 0.0, atol=1e-10)  # mm
+    reach = np.asarray(c.reachable)
+    np.testing.assert_allclose(np.asarray(c.rotation_to_contact)[reach], 0.0, atol=1e-13)  # rad
+    # Half of the pins sit on driving flanks, and all of them carry (zero clearance).
+    phi = flank_parameter(d, theta_T)
+    assert int(jnp.sum(c.on_driving_flank)) == z_pins // 2 == int(np.sum(phi > 0))
+    np.testing.assert_array_equal(np.asarray(c.on_driving_flank), phi > 0)
+    assert int(loaded_pairs(c, budget_mm=1e-9)) == z_pins // 2
+    assert abs(float(c.lost_motion)) < 1e-13 and abs(float(c.rotation_error)) < 1e-13
+
+
+def test_rotation_error_is_zero_without_errors():
+    d = basic()
+    s = sweep(d, None, revolution_angles(d, 8), normal=False)
+    assert bool(jnp.all(s.converged))
+    np.testing.assert_allclose(np.asarray(s.rotation_error), 0.0, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(s.lost_motion), 0.0, atol=1e-13)
+    # A sweep is the single-position analysis, position by position.
+    one = clearances(d, seed_errors(), float(revolution_angles(d, 8)[37]), normal=False)
+    many = sweep(d, seed_errors(), revolution_angles(d, 8), normal=False)
+    np.testing.assert_allclose(np.asarray(many.rotation_to_contact)[37], np.asarray(one.rotation_to_contact), rtol=1e-12, atol=1e-15)
+
+
+def test_pin_radius_error_gives_a_uniform_normal_clearance():
+    # Smaller pins on an exact wheel: every pin centre is still on the theoretical curve, at distance r from the
+    # flank (parallel curves), so the normal clearance at the theoretical position is r − r′ for every pin.
+    d = basic()
+    for delta_um in (-7.0, -30.0):
+        nc = np.asarray(normal_clearance(d, CycloidErrors(pin_radius=delta_um), 0.3))
+        np.testing.assert_allclose(nc, -delta_um * 1e-3, atol=1e-12)
+
+
+# ---------------------------------------------------------------- closed forms of the modifications
+
+
+def lever(d, phi):
+    """Lever arm of a contact about the disc centre, l = a z_a sin φ / S (derived in the module notes), mm."""
+    K = float(d.K1)
+    S = np.sqrt(1 + K * K - 2 * K * np.cos(phi))
+    return float(d.eccentricity) * d.z_lobes * np.sin(phi) / S
+
+
+@pytest.mark.parametrize("shift, equidistant", [(0.0, 0.002), (-0.002, 0.0), (-0.001, 0.0015)])
+def test_small_modifications_match_the_first_order_closed_form(shift, equidistant):
+    """First order: the flank moves along its normal by n(φ) = Δr_Z − ΔR_Z (1 − K_1 cos φ)/S (∂P/∂R = (sin φ/z_a,
+    cos φ/z_a), projected on N); the disc must turn n/l to close it, l = a z_a sin φ / S."""
+    d = basic(modification=CycloidModification(shift, equidistant))
+    theta_T = 0.05
+    c = clearances(d, None, theta_T)
+    phi = flank_parameter(d, theta_T)
+    K = float(d.K1)
+    S = np.sqrt(1 + K * K - 2 * K * np.cos(phi))
+    n = equidistant - shift * (1 - K * np.cos(phi)) / S
+    expected = np.sign(phi) * n / lever(d, np.abs(phi))
+    mid = (np.abs(phi) > 0.3) & (np.abs(phi) < 2.6)
+    got = np.asarray(c.rotation_to_contact)[mid]
+    np.testing.assert_allclose(got, expected[mid], rtol=2e-3)
+    np.testing.assert_allclose(np.asarray(first_order_clearance(d, phi))[mid] * np.sign(phi[mid]), expected[mid], rtol=1e-9)
+    # Normal clearance at the theoretical position: n(φ) itself (exactly Δr_Z for a pure equidistant).
+    nc0 = np.asarray(normal_clearance(d, None, theta_T))
+    np.testing.assert_allclose(nc0[mid], n[mid], atol=2e-3 * max(abs(shift), abs(equidistant)))
+    if shift == 0.0:
+        np.testing.assert_allclose(nc0, equidistant, atol=1e-12)
+    # At the contacting configuration: n(φ) − (turn to contact) × l(φ).
+    drv = np.asarray(c.on_driving_flank)
+    te = float(c.rotation_error)
+    nc = np.asarray(c.normal_clearance)
+    sel = mid & drv
+    np.testing.assert_allclose(nc[sel], n[sel] - te * lever(d, phi[sel]), atol=5e-3 * max(abs(shift), abs(equidistant)))
+    # Lost motion ≈ twice the smallest n/l (symmetric flanks).
+    assert float(c.lost_motion) == pytest.approx(2 * te, rel=1e-2)
+
+
+def test_pure_equidistant_contact_at_the_largest_lever_arm():
+    # n/l is smallest where l = a z_a sin φ / S is largest: cos φ = K_1, l = a z_a; so the contacting pair is the
+    # pin nearest to φ = arccos K_1 and the lost motion of a pure equidistant Δ is ≈ 2Δ/(a z_a).
+    d = basic(modification=CycloidModification(0.0, 0.001))
+    s = sweep(d, None, pitch_angles(d, 16))
+    for k in range(16):
+        phi = flank_parameter(d, float(s.input_angle[k]))
+        drv = phi > 0
+        best = np.argmax(np.where(drv, lever(d, np.abs(phi)), -1))
+        assert int(s.contact_pin[k]) == best
+    # Lost motion = Δ/l at the driving contact + Δ/l at the reverse contact (first order): at least 2Δ/(a z_a).
+    lm = np.asarray(s.lost_motion)
+    for k in range(16):
+        phi = flank_parameter(d, float(s.input_angle[k]))
+        l_f, l_r = lever(d, abs(phi[int(s.contact_pin[k])])), lever(d, abs(phi[int(s.reverse_contact_pin[k])]))
+        assert lm[k] == pytest.approx(0.001 / l_f + 0.001 / l_r, rel=1e-3)
+    assert np.all(lm >= 2 * 0.001 / (6.0 * 25) * (1 - 1e-3))
+
+
+def test_rotation_modification_gives_a_uniform_clearance():
+    delta = 20 / ARCSEC
+    d = basic(modification=CycloidModification(rotation=delta))
+    c = clearances(d, None, 0.2)
+    reach = np.asarray(c.reachable)
+    drv = np.asarray(c.on_driving_flank)
+    rot = np.asarray(c.rotation_to_contact)
+    np.testing.assert_allclose(rot[reach & drv], delta, rtol=1e-9)
+    np.testing.assert_allclose(rot[reach & ~drv], -delta, rtol=1e-9)
+    assert int(loaded_pairs(c, budget_mm=1e-9)) == 13
+    assert float(c.lost_motion) == pytest.approx(2 * delta, rel=1e-9)
+
+
+# ---------------------------------------------------------------- an independent check of the contact solve
+
+
+def test_rotation_to_contact_against_a_brute_force_search():
+    """For a few pins: turn the disc (scipy brentq) until the smallest distance (scipy bounded search over the
+    flank of `tooth_profile`) from the pin centre to the flank equals r′; check the sense of the constraint."""
+    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    err = seed_errors()
+    theta_T = 0.37
+    c = clearances(d, err, theta_T)
+    e = cp.checked_errors(d, err)
+    pins = cp._pins(d, e, jnp.asarray(theta_T))
+    r1 = 13.5 - 0.025
+    nominal = theta_T * 26 / 25
+    profile = jax.jit(lambda p, s: tooth_profile(d, p, errors=err, space=s))
+    for j in (0, 2, 5, 15, 20, 24):
+        space, side = int(pins.space[j]), float(pins.side[j])
+        cx, cy = (float(v) for v in pins.centre[j])
+        lo, hi = (0.0, math.pi) if side > 0 else (-math.pi, 0.0)
+
+        def gap(theta):
+            x = math.cos(theta) * cx + math.sin(theta) * cy
+            y = -math.sin(theta) * cx + math.cos(theta) * cy
+            f = lambda p: float(np.hypot(*(np.asarray(profile(p, space)) - (x, y))))  # noqa: E731
+            res = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12})
+            return res.fun - r1
+
+        t0 = nominal + float(c.rotation_to_contact[j])
+        root = brentq(gap, t0 - 2e-4, t0 + 2e-4, xtol=1e-14)
+        assert root - nominal == pytest.approx(float(c.rotation_to_contact[j]), abs=2e-9)
+        # Driving flanks bound the disc from above (θ ≤ θ_j), reverse flanks from below.
+        assert (gap(root - 1e-5) > 0) == (side > 0)
+
+
+# ---------------------------------------------------------------- gradients
+
+
+def _flat_errors(err: CycloidErrors):
+    leaves, tree = jax.tree.flatten(err)
+    return leaves, tree
+
+
+def test_gradients_match_finite_differences():
+    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    err = cp.checked_errors(d, seed_errors())
+    err = eqx.tree_at(lambda e: (e.infeed, e.pin_tangential, e.pin_circle_eccentricity),
+                      err, (jnp.linspace(-5, 5, 25), 8 * jnp.sin(jnp.arange(26.0)), jnp.asarray(6.0)))
+    theta_T = 0.41
+    w = jnp.asarray(np.random.default_rng(0).normal(size=26))
+
+    def f(diff):
+        mod, e = diff
+        dd = eqx.tree_at(lambda x: x.modification, d, mod)
+        c = cp._analyse(dd, e, jnp.asarray(theta_T), True)
+        rot = jnp.where(c.reachable, c.rotation_to_contact, 0.0)
+        return (jnp.sum(w * rot) * 1e4 + c.lost_motion * 1e3 + jnp.sum(w * c.normal_clearance)
+                + smooth_loaded_pairs(c, budget_mm=0.2, width_mm=0.02))
+
+    x = (d.modification, err)
+    g = jax.grad(f)(x)
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        v = jax.tree.map(lambda a: jnp.asarray(rng.normal(size=np.shape(a))), x)
+        # Angles get small steps, µm and mm their own scale.
+        v = (jax.tree.map(lambda a: a * 1e-3, v[0]), eqx.tree_at(
+            lambda e: (e.index_offset, e.indexing, e.setup_phase, e.mandrel_phase, e.disc_offset_phase,
+                       e.pin_wheel_offset_phase, e.pin_circle_eccentricity_phase), v[1],
+            replace_fn=lambda a: a * 1e-4))
+        h = 1e-3
+        plus = jax.tree.map(lambda a, b: a + h * b, x, v)
+        minus = jax.tree.map(lambda a, b: a - h * b, x, v)
+        fd = (float(f(plus)) - float(f(minus))) / (2 * h)
+        ad = sum(float(jnp.sum(a * b)) for a, b in zip(jax.tree.leaves(g), jax.tree.leaves(v)))
+        assert ad == pytest.approx(fd, rel=2e-5, abs=1e-9)
+
+
+def test_gradients_have_no_nans_for_pins_that_never_touch():
+    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    s = sensitivities(d, seed_errors(), budget_mm=0.2, positions=pitch_angles(d, 4),
+                      metrics=("lost_motion_max", "rotation_error_p2p", "loaded_pairs_smooth"))
+    for sens in s.values():
+        for leaf in jax.tree.leaves((sens.errors, sens.modification)):
+            assert np.all(np.isfinite(np.asarray(leaf)))
+    # A rotation modification δ opens both flanks by δ: the lost motion grows by 2δ (exactly without errors; the
+    # wheel is turned about the grinding axis, not the bore, so the errors here shift it by ~1e-4).
+    assert float(s["lost_motion_max"].modification.rotation) == pytest.approx(2.0, rel=1e-3)
+    exact = sensitivities(d, None, budget_mm=0.2, positions=pitch_angles(d, 4))
+    assert float(exact["lost_motion_max"].modification.rotation) == pytest.approx(2.0, rel=1e-9)
+
+
+# ---------------------------------------------------------------- bad inputs
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(z_pins=26, z_lobes=24, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0), "z_lobes"),
+    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=7.5), "K1"),
+    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, K1=1.2), "K1"),
+    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=22.0, eccentricity=6.0), "undercut"),
+    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=24.0, eccentricity=6.0), "overlap"),
+    (dict(z_pins=26, pin_circle_radius=-195.0, pin_radius=13.5, eccentricity=6.0), "pin_circle_radius"),
+    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=-13.5, eccentricity=6.0), "pin_radius"),
+    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=-6.0), "eccentricity"),
+    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5), "eccentricity / K1"),
+    (dict(z_pins=26.5, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0), "z_pins"),
+    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_radius=23.0), "undercut"),
+    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_circle_radius=150.0), "K = a z_b / R_Z"),
+])
+def test_bad_geometry_is_rejected(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        CycloidPin(**kwargs)
+
+
+def test_bad_error_shapes_are_rejected():
+    d = basic()
+    with pytest.raises(ValueError, match="errors.infeed: give a scalar or one value per tooth space"):
+        clearances(d, CycloidErrors(infeed=np.zeros(26)), 0.1)
+    with pytest.raises(ValueError, match="errors.pin_tangential"):
+        clearances(d, CycloidErrors(pin_tangential=np.zeros(25)), 0.1)
+    with pytest.raises(ValueError, match="Sinusoid"):
+        CycloidTolerances(eccentricity=Sinusoid(1.0))
+    with pytest.raises(ValueError, match="unknown error field"):
+        CycloidTolerances(eccentricty=Exactly(1.0))
+    with pytest.raises(ValueError, match="half_width"):
+        SignedUniform(-1.0)
+
+
+# ---------------------------------------------------------------- Monte Carlo and sensitivities
+
+
+def small_tolerances():
+    return CycloidTolerances(dressing_y=SignedUniform(2.0), infeed=SignedUniform(10.0), indexing=SignedUniform(30 / ARCSEC),
+                             setup_eccentricity=Uniform(0.0, 31.5), setup_phase=UniformPhase(),
+                             pin_radius=SignedUniform(16.75, -41.75), eccentricity=SignedUniform(20.0),
+                             pin_tangential=Sinusoid(Uniform(0.0, 90.0), UniformPhase()), disc_offset=Uniform(40.0, 90.0),
+                             disc_offset_phase=UniformPhase())
+
+
+def test_monte_carlo_is_reproducible_and_matches_the_single_reducer():
+    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    pos = revolution_angles(d, 1)
+    st = CycloidStudy(d, small_tolerances(), budget_mm=0.2, positions=pos)
+    # Chunks of 2 and 3 blocks: bit-identical. (A chunk of a single block may differ in the last bits: XLA
+    # simplifies a one-trip loop, which changes how the Newton iterations are fused.)
+    a = gearte.monte_carlo(st, key=3, n_samples=24, block_size=4, chunk_size=8).values
+    b = gearte.monte_carlo(st, key=3, n_samples=24, block_size=4, chunk_size=12).values
+    np.testing.assert_array_equal(a, b)
+    u = st.unpack(a)
+    assert np.all(u["not_converged"] == 0)
+    assert np.all(u["lost_motion_max"] >= u["lost_motion_min"])
+    # Sample 5 by hand: draw its errors, analyse them.
+    err = st.tolerances.sample(jax.random.fold_in(jax.random.key(3), 5), d)
+    m = unit_metrics(d, err, budget_mm=0.2, positions=pos)
+    assert u["lost_motion_max"][5] == pytest.approx(float(m["lost_motion_max"]), rel=1e-12)
+    assert u["rotation_error_p2p"][5] == pytest.approx(float(m["rotation_error_p2p"]), rel=1e-12)
+    at = clearances(d, err, d.pitch / 2)
+    assert u["loaded_pairs"][5] == int(loaded_pairs(at, budget_mm=0.2))
+    np.testing.assert_allclose(u["normal_clearance"][5], np.asarray(at.normal_clearance), atol=1e-11)  # mm
+    # The draws follow their laws.
+    draws = jax.vmap(lambda k: st.tolerances.sample(k, d))(jax.random.split(jax.random.key(0), 4000))
+    pr = np.asarray(draws.pin_radius)
+    assert pr.min() >= -58.5 and pr.max() <= -25.0 and abs(pr.mean() + 41.75) < 0.5
+    amp = np.max(np.abs(np.asarray(draws.pin_tangential)), axis=1)
+    assert amp.max() <= 90.0 and amp.mean() == pytest.approx(45.0, rel=0.05)
+
+
+def test_tolerance_sensitivities_match_finite_differences_with_common_random_numbers():
+    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    tol = CycloidTolerances(pin_radius=SignedUniform(16.75, -41.75), eccentricity=SignedUniform(20.0))
+    pos = pitch_angles(d, 4)
+    out = tolerance_sensitivities(d, tol, key=9, n_samples=16, budget_mm=0.2, positions=pos, chunk=8,
+                                  metrics=("lost_motion_max",))
+    mean, grad = out["lost_motion_max"]
+    h = 0.5
+
+    def mean_lm(half):
+        t = CycloidTolerances(pin_radius=SignedUniform(16.75, -41.75), eccentricity=SignedUniform(half))
+        vals = [float(unit_metrics(d, t.sample(jax.random.fold_in(jax.random.key(9), i), d), budget_mm=0.2,
+                                   positions=pos)["lost_motion_max"]) for i in range(16)]
+        return np.mean(vals)
+
+    assert float(mean) == pytest.approx(mean_lm(20.0), rel=1e-12)
+    fd = (mean_lm(20.0 + h) - mean_lm(20.0 - h)) / (2 * h)
+    assert float(grad.laws["eccentricity"].half_width) == pytest.approx(fd, rel=1e-3, abs=1e-10)
+
+
+# ---------------------------------------------------------------- the optimiser
+
+
+@pytest.mark.slow
+def test_optimiser_keeps_the_lost_motion_within_spec_and_gains_pairs():
+    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    am = 1 / ARCMIN
+    res = optimise_modification(d, None, lost_motion_max=20 * am, radial_clearance_min=0.2, budget_mm=0.2,
+                                positions=pitch_angles(d, 4), max_steps=60)
+    assert res.feasible
+    assert res.lost_motion_max <= 20 * am and res.radial_clearance >= 0.2 - 1e-12
+    assert not res.initial.feasible  # the seed's design has ~23′ of lost motion without errors
+    assert res.loaded_pairs_mean >= res.initial.loaded_pairs_mean
+    # The reported counts are the exact ones at the reported modification.
+    m = unit_metrics(res.drive, None, budget_mm=0.2, positions=pitch_angles(d, 4))
+    assert float(m["loaded_pairs_mean"]) == pytest.approx(res.loaded_pairs_mean)
+    assert all(r in ("successful", "max_steps_reached", "nonlinear_max_steps_reached") for s in res.starts for r in s.results)
+
+
+# ---------------------------------------------------------------- gearte run
+
+
+def run(*args):
+    return cli.main([str(a) for a in args])
+
+
+@pytest.mark.slow
+def test_example_runs_and_writes_every_output(tmp_path, capsys):
+    out = tmp_path / "mod"
+    assert run("run", ROOT / "examples" / "cycloid_yao2001_modified.toml", "--out", out, "--samples", 40) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["clearance_per_pin.png", "clearance_vs_input.png", "curves.npz",
+                                                     "monte_carlo.png", "report.md", "rotation_error.png", "samples.npz",
+                                                     "summary.json"]
+    s = json.loads((out / "summary.json").read_text())
+    for key in ("pairs", "contact_pair", "loaded_pairs", "deformation_budget_mm", "lost_motion_arcmin",
+                "rotation_error_p2p_arcsec", "monte_carlo", "sensitivities", "optimised_modification"):
+        assert key in s, key
+    assert len(s["pairs"]) == 26 and s["deformation_budget_mm"] == 0.2 and s["loaded_pairs_out_of"] == 13
+    contact = s["contact_pair"]["pin"]
+    row = s["pairs"][contact - 1]
+    assert row["on_driving_flank"] and row["tangential_clearance_mm"] == pytest.approx(0.0, abs=1e-12)
+    assert abs(row["normal_clearance_mm"]) < 1e-9
+    assert s["loaded_pairs"] == sum(p["loaded"] for p in s["pairs"])
+    assert sum(p["on_driving_flank"] for p in s["pairs"]) == 13
+    assert s["sweep"]["all_solves_converged"]
+    # The numbers agree with the library called directly.
+    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    c = clearances(d, seed_errors(), d.pitch / 2)
+    assert contact == int(c.contact_pin) + 1
+    assert s["lost_motion_at_input_angle_arcmin"] == pytest.approx(float(c.lost_motion) * ARCMIN, rel=1e-12)
+    assert s["optimised_modification"]["best"]["feasible"]
+    report = (out / "report.md").read_text()
+    for needed in ("contacting pair", "loaded pairs", "lost motion", "Monte Carlo", "float64"):
+        assert needed in report, needed
+    assert "loaded pairs" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_unmodified_example_has_more_loaded_pairs(tmp_path):
+    mod = json.loads(json.dumps(_summary(tmp_path, "cycloid_yao2001_modified.toml")))
+    unmod = _summary(tmp_path, "cycloid_yao2001_unmodified.toml")
+    assert unmod["loaded_pairs"] > mod["loaded_pairs"]
+    assert unmod["lost_motion_arcmin"] < mod["lost_motion_arcmin"]
+
+
+def _summary(tmp_path, name):
+    text = (ROOT / "examples" / name).read_text()
+    text = text.split("[tolerances]")[0] + "[sensitivity]\nsamples = 0\n"  # the reducer analysed only: fast
+    p = tmp_path / name
+    p.write_text(text)
+    out = tmp_path / (name + ".out")
+    assert run("run", p, "--out", out) == 0
+    return json.loads((out / "summary.json").read_text())
+
+
+@pytest.mark.parametrize("edit, match", [
+    (("z_lobes = 25", "z_lobes = 24"), "z_lobes"),
+    (("eccentricity_mm = 6.0", "eccentricity_mm = 8.0"), "K1"),
+    (("pin_radius_mm = 13.880", "pin_radius_mm = 25.0"), "undercut"),
+    (("pin_radius_mm = 13.5 ", "pin_radius_mm = -13.5 "), "pin_radius_mm"),
+    (("deformation_budget_mm = 0.2", "deformation_budget_mm = -0.2"), "deformation_budget_mm"),
+    (("disc_offset_um = 57.5", "disc_ofset_um = 57.5"), "disc_ofset_um"),
+    (("disc_offset_um = 57.5", "disc_offset_mm = 0.0575"), "disc_offset_um"),
+    (("infeed_um = 0 ", "infeed_um = [1, 2] "), "infeed_um"),
+    (('pin_radius = { law = "uniform", low_um = -58.5, high_um = -25 }', 'pin_radius = { law = "uniform", low_um = -25, high_um = -58.5 }'), "high_um"),
+    (('eccentricity = { law = "uniform", half_width_um = 20 }', 'eccentricity = { law = "sinusoid", amplitude_um = 20 }'), "sinusoid"),
+    (("lost_motion_max_arcmin = 25", "lost_motion_max_arcmin = -1"), "lost_motion_max_arcmin"),
+])
+def test_bad_config_exits_2_naming_the_field(tmp_path, capsys, edit, match):
+    text = (ROOT / "examples" / "cycloid_yao2001_modified.toml").read_text()
+    old, new = edit
+    assert old in text, old
+    p = tmp_path / "bad.toml"
+    p.write_text(text.replace(old, new, 1))
+    out = tmp_path / "never"
+    assert run("run", p, "--out", out) == 2
+    err = capsys.readouterr().err
+    assert match in err, err
+    assert not out.exists()
+    assert run("check", p) == 2
+
+
+def test_check_accepts_the_examples(capsys):
+    for name in ("cycloid_yao2001_modified.toml", "cycloid_yao2001_unmodified.toml"):
+        assert run("check", ROOT / "examples" / name) == 0
+    assert "OK" in capsys.readouterr().out
+
+
+def test_new_error_values_and_modifications_do_not_recompile():
+    @eqx.filter_jit
+    @eqx.debug.assert_max_traces(max_traces=1)
+    def lost_motion(drive, errors, theta):
+        return cp._analyse(drive, errors, theta, False).lost_motion
+
+    for k, mod in enumerate((CycloidModification(), CycloidModification(-0.2, 0.4), CycloidModification(0.1, 0.3, 1e-4))):
+        d = basic(modification=mod)
+        e = cp.checked_errors(d, CycloidErrors(pin_radius=-5.0 * k, indexing=np.full(25, 1e-5 * k), disc_offset=3.0 * k))
+        lost_motion(d, e, jnp.asarray(0.1 * k))
