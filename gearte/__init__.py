@@ -50,6 +50,12 @@ from ._montecarlo import (
     statistics as statistics,
 )
 from ._precision import require_x64 as require_x64, x64_enabled as x64_enabled
+from ._sensitivity import (
+    SensitivityTable as SensitivityTable,
+    SobolIndices as SobolIndices,
+    sensitivity_table as sensitivity_table,
+    sobol_indices as sobol_indices,
+)
 from ._signal import Components as Components, TESignal as TESignal, as_frequency as as_frequency, evaluate as evaluate, to_signal as to_signal
 from ._records import (
     Record as Record,

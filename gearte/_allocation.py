@@ -92,6 +92,7 @@ def allocate_measured(
     - `drive`, `errors`: the drive and its measured errors (magnitudes µm, phases rad).
     - `adjust`: source name → step (rad) between allowed assembly positions (e.g. 2π/z
       for a gear turned by whole teeth, 2π/n for an n-bolt pattern), or None for any angle.
+      Allowed positions are the given (as-delivered) phase turned by whole steps.
     - `key`: seed or key for the random starts.
     - `metric`: "peak" or "peak_to_peak".
     - `starts`: optimiser starts, run together under `vmap`.
@@ -141,7 +142,7 @@ def allocate_measured(
     steps = [adjust[n] for n in names for _ in range(counts_all[n])]
     enumerated = False
     if any(s is not None for s in steps):
-        y_best, te_best, enumerated = _discrete(exact, y_best, steps, enumerate_limit)
+        y_best, te_best, enumerated = _discrete(exact, y_best, y_given, steps, enumerate_limit)
     phases, i = {}, 0
     for n, c in zip(names, counts):
         phases[n] = jnp.mod(y_best[i:i + c], _TWO_PI) if c > 1 else jnp.mod(y_best[i], _TWO_PI)
@@ -150,15 +151,16 @@ def allocate_measured(
                               converged=_check_solver_results(sol.result), enumerated=enumerated)
 
 
-def _discrete(exact, y_cont, steps, limit):
-    """Snap to allowed positions; enumerate all of them when few enough, else search neighbours."""
+def _discrete(exact, y_cont, y_given, steps, limit):
+    """Snap to allowed positions (the given phase turned by whole steps); enumerate all of them
+    when few enough, else search neighbours."""
     grids = []
-    for y, s in zip(np.asarray(y_cont), steps):
+    for y, y0, s in zip(np.asarray(y_cont), np.asarray(y_given), steps):
         if s is None:
             grids.append(np.array([y]))
         else:
             n = max(1, int(round(_TWO_PI / s)))
-            grids.append(np.arange(n) * (_TWO_PI / n))
+            grids.append(y0 + np.arange(n) * (_TWO_PI / n))
     total = int(np.prod([len(g) for g in grids]))
     f = jax.jit(jax.vmap(exact))
     if total <= limit:

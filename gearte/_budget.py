@@ -336,7 +336,7 @@ def contributions(p: BudgetProblem, tolerances: Mapping[str, float], *, key: int
     """
     draws = _draws(p, as_key(key), n_samples)
     t = {n: jnp.asarray(float(tolerances[n])) for n in p.names}
-    g = jax.grad(lambda tt: statistic(p, te_samples(p, tt, draws)))(t)
+    g = eqx.filter_jit(jax.grad(lambda tt, dr: statistic(p, te_samples(p, tt, dr))))(t, draws)
     return {n: float(g[n] * t[n]) for n in p.names}
 
 

@@ -347,9 +347,8 @@ class AllocationSpec:
     seed_rule: dict[str, float] | None
 
 
-def load_study(path: str | Path, *, samples: int | None = None, seed: int | None = None) -> Study:
-    """Read and validate a study file; `samples` and `seed` override the file's values."""
-    path = Path(path)
+def read_toml(path: Path) -> dict:
+    """The parsed TOML of a study file, or a ConfigError naming the file."""
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -357,9 +356,15 @@ def load_study(path: str | Path, *, samples: int | None = None, seed: int | None
     except OSError as e:
         raise ConfigError(f"{path}: cannot read ({e.strerror})") from None
     try:
-        raw = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{path}: not valid TOML: {e}") from None
+
+
+def load_study(path: str | Path, *, samples: int | None = None, seed: int | None = None) -> Study:
+    """Read and validate a study file; `samples` and `seed` override the file's values."""
+    path = Path(path)
+    raw = read_toml(path)
     try:
         return _build(raw, str(path), samples=samples, seed=seed)
     except ConfigError as e:

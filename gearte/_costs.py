@@ -32,20 +32,11 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._iso1328 import _GRADES, _standard, grade_for_tolerance, iso1328_tolerance
+from ._validate import as_float
 
 
 def _coef(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{name}: must be finite, got {value!r}")
-    if positive and not v > 0:
-        raise ValueError(f"{name}: must be > 0, got {v:g}")
-    if nonnegative and not v >= 0:
-        raise ValueError(f"{name}: must be ≥ 0, got {v:g} (a cost cannot be negative)")
-    return v
+    return as_float(name, value, positive=positive, nonnegative=nonnegative, hint="a cost cannot be negative")
 
 
 def _tolerance(T: ArrayLike, throw: bool) -> Float[Array, "..."]:

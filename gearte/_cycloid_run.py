@@ -38,7 +38,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from ._config import ConfigError, _Table
+from ._config import ConfigError, _Table, read_toml
 from ._distributions import FixedPhase, Normal, Rayleigh, TruncatedNormal, UniformPhase
 from ._io import atomic_output_dir, write_json
 from ._montecarlo import DEFAULT_SAMPLES, monte_carlo, statistics
@@ -110,16 +110,7 @@ class CycloidStudyConfig:
 def load_cycloid_study(path: str | Path, *, samples: int | None = None, seed: int | None = None) -> CycloidStudyConfig:
     """Read and validate a cycloid-pin study file; `samples` and `seed` override the file's."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read ({e.strerror})") from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+    raw = read_toml(path)
     try:
         return _build(raw, str(path), samples=samples, seed=seed)
     except ConfigError as e:

@@ -22,19 +22,11 @@ import jax.numpy as jnp
 from jax.scipy.special import ndtr, ndtri
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from ._validate import as_float
+
 
 def _check_finite(name: str, value: float, *, positive: bool = False, nonnegative: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{name}: must be finite, got {value!r}")
-    if positive and not v > 0:
-        raise ValueError(f"{name}: must be > 0, got {v}")
-    if nonnegative and v < 0:
-        raise ValueError(f"{name}: must be ≥ 0, got {v} (a tolerance or magnitude cannot be negative)")
-    return v
+    return as_float(name, value, positive=positive, nonnegative=nonnegative, hint="a tolerance or magnitude cannot be negative")
 
 
 class AbstractMagnitude(eqx.Module):

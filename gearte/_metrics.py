@@ -217,6 +217,11 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     return state[1][..., 0], state[1][..., 1]
 
 
+# Compiled once per signal structure (orders) and options, also when called eagerly: the
+# certification loop would otherwise be compiled afresh at every eager call.
+_locate_extrema_jit = eqx.filter_jit(_locate_extrema)
+
+
 def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 3, newton_steps: int = 1) -> Extrema:
     """Exact maximum and minimum of the TE over the whole hyper-period.
 
@@ -238,7 +243,7 @@ def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 3, newt
         zero = jnp.zeros_like(signal.offset)
         return Extrema(max=signal.offset, min=signal.offset, theta_max=zero, theta_min=zero)
     frozen = jax.lax.stop_gradient(signal)
-    tau_max, tau_min = _locate_extrema(frozen, oversample, candidates, newton_steps)
+    tau_max, tau_min = _locate_extrema_jit(frozen, oversample, candidates, newton_steps)
     tau_max, tau_min = jnp.mod(tau_max, _TWO_PI), jnp.mod(tau_min, _TWO_PI)
     theta_max = jax.lax.stop_gradient(tau_max / f0)
     theta_min = jax.lax.stop_gradient(tau_min / f0)

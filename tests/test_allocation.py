@@ -69,6 +69,18 @@ def test_discrete_positions_are_verified_by_enumeration():
     assert np.isclose(float(r.phases["b"]) % (math.pi / 6), 0, atol=1e-12) or np.isclose(float(r.phases["b"]) % (math.pi / 6), math.pi / 6)
 
 
+def test_discrete_positions_are_turns_from_the_delivered_phase():
+    # A part delivered at 0.1 rad can be turned by whole steps only: 0.1 + k·π/6, never k·π/6.
+    d = explicit(("a", 1, 0.0), ("b", 1, 0.0))
+    errs = {"a": gearte.Eccentricity(5.0, 0.0), "b": gearte.Eccentricity(5.0, 0.1)}
+    r = allocate_measured(d, errs, adjust={"b": 2 * math.pi / 12}, key=0, starts=4)
+    assert r.enumerated
+    k = (float(r.phases["b"]) - 0.1) / (math.pi / 6)
+    np.testing.assert_allclose(k, round(k), atol=1e-9)
+    # Best reachable: b opposite a (π away) is 0.1 + 6·π/6 → |5 e^{0} + 5 e^{i(π + 0.1)}| = 10 sin(0.05).
+    np.testing.assert_allclose(float(r.te) / GAIN, 10 * math.sin(0.05), rtol=1e-6)
+
+
 @pytest.fixture(scope="module")
 def seed_problem():
     s = load_study(ROOT / "examples" / "planetary_wang2013_allocate.toml")

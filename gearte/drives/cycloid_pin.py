@@ -98,6 +98,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._precision import require_x64
+from .._validate import as_float, as_int
 
 UM = 1e-3  # mm per µm
 TWO_PI = 2.0 * math.pi
@@ -107,31 +108,10 @@ TWO_PI = 2.0 * math.pi
 
 
 def _number(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
-    if isinstance(value, bool):
-        raise ValueError(f"{name}: expected a number, got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{name}: must be a finite number, got {value!r}")
-    if positive and not v > 0:
-        raise ValueError(f"{name}: must be > 0, got {v:g} (a radius or length cannot be zero or negative)")
-    if nonnegative and v < 0:
-        raise ValueError(f"{name}: must be ≥ 0, got {v:g}")
-    return v
+    return as_float(name, value, positive=positive, nonnegative=nonnegative, hint="a radius or length cannot be zero or negative" if positive else "")
 
 
-def _whole(name: str, value, *, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        else:
-            raise ValueError(f"{name}: must be a whole number, got {value!r}")
-    value = int(value)
-    if value < minimum:
-        raise ValueError(f"{name}: must be ≥ {minimum}, got {value}")
-    return value
+_whole = as_int
 
 
 def min_curvature_radius(pin_circle_radius: float, eccentricity: float, z_pins: int, *, points: int = 20001) -> float:

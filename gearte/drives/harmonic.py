@@ -88,6 +88,7 @@ from .._signal import Components, TESignal
 from .._twoscale import TwoScaleExtrema, extrema_auto, fast_line_order
 from ..units import ARCSEC_PER_RAD
 from ._base import AbstractDrive
+from .._validate import as_float, as_int
 
 #: Error-source classes of seed 002, sec. 2.2, and the kinds of tolerance each may hold.
 CLASSES: dict[str, dict] = {
@@ -128,29 +129,10 @@ SEED_ARCSEC_PER_UM_MM = 412.8
 
 
 def _finite(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{name}: must be finite, got {value!r}")
-    if positive and not v > 0:
-        raise ValueError(f"{name}: must be > 0, got {v:g}")
-    if nonnegative and v < 0:
-        raise ValueError(f"{name}: must be ≥ 0, got {v:g} (a tolerance cannot be negative)")
-    return v
+    return as_float(name, value, positive=positive, nonnegative=nonnegative, hint="a tolerance cannot be negative")
 
 
-def _whole(name: str, value, *, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        else:
-            raise ValueError(f"{name}: must be a whole number, got {value!r}")
-    value = int(value)
-    if value < minimum:
-        raise ValueError(f"{name}: must be ≥ {minimum}, got {value}")
-    return value
+_whole = as_int
 
 
 class HarmonicSource(eqx.Module):

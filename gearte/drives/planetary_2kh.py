@@ -33,6 +33,7 @@ from jaxtyping import Array, Float
 from .._errors import Eccentricity
 from .._signal import Components
 from ._base import AbstractDrive
+from .._validate import as_float, as_int
 
 MEMBERS = ("sun", "carrier", "ring")
 COUPLINGS = ("single_path", "load_sharing")
@@ -48,28 +49,11 @@ SOURCES = {
 }
 
 
-def _as_int(name: str, value, *, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        else:
-            raise ValueError(f"{name}: must be a whole number, got {value!r}")
-    value = int(value)
-    if value < minimum:
-        raise ValueError(f"{name}: must be ≥ {minimum}, got {value}")
-    return value
+_as_int = as_int
 
 
 def _as_float(name: str, value, *, positive: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{name}: must be finite, got {value!r}")
-    if positive and not v > 0:
-        raise ValueError(f"{name}: must be > 0, got {v}")
-    return v
+    return as_float(name, value, positive=positive)
 
 
 def member_speeds(z_sun: int, z_ring: int, *, input: str, fixed: str) -> dict[str, Fraction]:

@@ -1,0 +1,38 @@
+"""Validation of user-given numbers, shared by every model: messages name the field and the fix."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def as_float(name: str, value, *, positive: bool = False, nonnegative: bool = False, hint: str = "") -> float:
+    """`value` as a finite float; raises ValueError naming `name` (with `hint` on a sign error)."""
+    if isinstance(value, bool):
+        raise ValueError(f"{name}: expected a number, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{name}: must be a finite number, got {value!r}")
+    note = f" ({hint})" if hint else ""
+    if positive and not v > 0:
+        raise ValueError(f"{name}: must be > 0, got {v:g}{note}")
+    if nonnegative and v < 0:
+        raise ValueError(f"{name}: must be ≥ 0, got {v:g}{note}")
+    return v
+
+
+def as_int(name: str, value, *, minimum: int) -> int:
+    """`value` as a whole number ≥ `minimum` (a float with no fractional part is accepted)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        else:
+            raise ValueError(f"{name}: must be a whole number, got {value!r}")
+    value = int(value)
+    if value < minimum:
+        raise ValueError(f"{name}: must be ≥ {minimum}, got {value}")
+    return value

@@ -1,0 +1,260 @@
+"""Sobol' indices: closed forms, an independent NumPy pick-freeze estimate, per-planet inputs,
+per-source aggregation, reproducibility, the side-by-side table, bad inputs."""
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+from scipy import stats as sps
+
+import gearte
+from gearte._budget import budget_problem, contributions
+from gearte._config import load_study
+from gearte._sensitivity import sensitivity_table, sobol_indices
+from gearte.drives import ExplicitDrive, ExplicitTerm, Planetary2KH
+
+ROOT = Path(__file__).resolve().parents[1]
+GAIN = 1e-5  # rad/µm
+
+
+def study(terms, sources, *, metric="peak"):
+    d = ExplicitDrive([ExplicitTerm(s, f, offset=o) for s, f, o in terms], gain=GAIN)
+    return gearte.TEStudy(d, gearte.ErrorModel(sources, d.error_sources), metric=metric)
+
+
+def test_single_source_at_one_frequency_the_magnitude_explains_everything():
+    # Peak of g·X sin(θ + φ) is g·X whatever φ: S = S_T = 1 for the magnitude, exactly 0 for the phase.
+    st = study([("a", 1, 0.0)], {"a": gearte.ErrorSource(gearte.Rayleigh(5.0, truncate_at=10.0), gearte.UniformPhase())})
+    r = sobol_indices(st, key=0, n=1024)
+    assert r.inputs == ("a.magnitude", "a.phase")
+    assert r.input_kind == ("magnitude", "phase") and r.input_source == ("a", "a")
+    np.testing.assert_allclose(r.first_order[0], 1.0, atol=0.02)
+    np.testing.assert_allclose(r.total_order[0], 1.0, atol=0.02)
+    np.testing.assert_allclose(r.first_order[1], 0.0, atol=1e-9)
+    np.testing.assert_allclose(r.total_order[1], 0.0, atol=1e-9)
+    np.testing.assert_allclose(r.source_closed_first_order["a"], 1.0, atol=0.02)
+    np.testing.assert_allclose(r.source_total_order["a"], 1.0, atol=0.02)
+    np.testing.assert_allclose(r.source_first_order_sum["a"], r.first_order.sum(), rtol=1e-12)
+    # Mean of the truncated Rayleigh (σ = 5, T = 10), in closed form, times the gain.
+    law = sps.rayleigh(scale=5.0)
+    mean = law.expect(lambda x: x, lb=0, ub=10.0) / law.cdf(10.0)
+    np.testing.assert_allclose(r.mean, GAIN * mean, rtol=2e-3)
+
+
+def test_additive_case_matches_the_closed_form():
+    # Crests aligned at θ = π/2: sin θ and sin(3θ + π) both reach +1 there (and −1 at 3π/2), so the
+    # exact peak is g (X_a + X_b): additive. X_a ~ U(0, 10), X_b ~ U(5, 25): variances 100/12 and 400/12,
+    # so S_a = S_Ta = 0.2 and S_b = S_Tb = 0.8.
+    st = study([("a", 1, 0.0), ("b", 3, math.pi)],
+               {"a": gearte.ErrorSource(gearte.Uniform(0.0, 10.0), gearte.FixedPhase(0.0)),
+                "b": gearte.ErrorSource(gearte.Uniform(5.0, 25.0), gearte.FixedPhase(0.0))})
+    r = sobol_indices(st, key=3, n=2048)
+    assert r.inputs == ("a.magnitude", "b.magnitude")  # fixed phases are not inputs
+    np.testing.assert_allclose(r.first_order, [0.2, 0.8], atol=0.01)
+    np.testing.assert_allclose(r.total_order, [0.2, 0.8], atol=0.01)
+    np.testing.assert_allclose(r.variance, GAIN**2 * (100 + 400) / 12, rtol=0.01)
+    np.testing.assert_allclose(r.mean, GAIN * (5 + 15), rtol=1e-3)
+
+
+def _numpy_pick_freeze(f, sample, n, groups, rng):
+    """Plain NumPy estimates, independent of gearte and scipy: Saltelli (2010) first-order and
+    Jansen (1999) total indices of each column group, from random (not quasi-random) A and B."""
+    A, B = sample(rng, n), sample(rng, n)
+    fA, fB = f(A), f(B)
+    var = np.var(np.concatenate([fA, fB]))
+    out = []
+    for cols in groups:
+        AB = A.copy()
+        AB[:, cols] = B[:, cols]
+        fAB = f(AB)
+        out.append((np.mean(fB * (fAB - fA)) / var, 0.5 * np.mean((fA - fAB) ** 2) / var))
+    return np.array(out)
+
+
+def test_interacting_inputs_against_an_independent_numpy_estimate():
+    # a sin θ + b sin(θ + φ) has peak |a + b e^{iφ}|: the magnitudes and b's phase interact.
+    st = study([("a", 1, 0.0), ("b", 1, 0.0)],
+               {"a": gearte.ErrorSource(gearte.Uniform(2.0, 6.0), gearte.FixedPhase(0.0)),
+                "b": gearte.ErrorSource(gearte.Rayleigh(2.0, truncate_at=5.0), gearte.UniformPhase())})
+    r = sobol_indices(st, key=11, n=4096)
+    assert r.inputs == ("a.magnitude", "b.magnitude", "b.phase")
+
+    ray = sps.rayleigh(scale=2.0)
+
+    def sample(rng, n):
+        u = rng.uniform(size=(n, 3))
+        return np.stack([2.0 + 4.0 * u[:, 0], ray.ppf(u[:, 1] * ray.cdf(5.0)), 2 * math.pi * u[:, 2]], axis=1)
+
+    f = lambda x: np.abs(x[:, 0] + x[:, 1] * np.exp(1j * x[:, 2]))
+    ref = _numpy_pick_freeze(f, sample, 400_000, [[0], [1], [2], [1, 2]], np.random.default_rng(7))
+    np.testing.assert_allclose(r.first_order, ref[:3, 0], atol=0.03)
+    np.testing.assert_allclose(r.total_order, ref[:3, 1], atol=0.03)
+    np.testing.assert_allclose(r.source_closed_first_order["b"], ref[3, 0], atol=0.03)
+    np.testing.assert_allclose(r.source_total_order["b"], ref[3, 1], atol=0.03)
+    # Interactions are real here: the phase matters only together with the magnitudes.
+    assert r.total_order[2] > r.first_order[2] + 0.1
+    # One-input sources: the source's indices are its input's.
+    np.testing.assert_allclose(r.source_closed_first_order["a"], r.first_order[0], rtol=1e-12)
+    np.testing.assert_allclose(r.source_total_order["a"], r.total_order[0], rtol=1e-12)
+    # Σ S_i over b's inputs bounds its closed first-order index from below.
+    assert r.source_first_order_sum["b"] <= r.source_closed_first_order["b"] + 0.01
+
+
+@pytest.mark.parametrize("coupling", ["single_path", "load_sharing"])
+def test_per_planet_sources_give_one_magnitude_and_one_phase_input_per_planet(coupling):
+    d = Planetary2KH(12, 36, 84, module=1.0, pressure_angle=math.pi / 9, n_planets=3, coupling=coupling)
+    law = lambda t: gearte.Rayleigh(t / 2, truncate_at=t)
+    tol = {"sun_manufacturing": 13, "planet_manufacturing": 16, "ring_manufacturing": 21, "sun_assembly": 12,
+           "planet_assembly": 8, "carrier_assembly": 15}
+    model = gearte.ErrorModel({k: gearte.ErrorSource(law(v), gearte.UniformPhase()) for k, v in tol.items()}, d.error_sources)
+    r = sobol_indices(gearte.TEStudy(d, model), key=5, n=256)
+    # 4 single sources × 2 inputs + 2 per-planet sources × (3 + 3) inputs.
+    assert len(r.inputs) == 4 * 2 + 2 * 6
+    for i in range(3):
+        assert f"planet_manufacturing.magnitude[{i}]" in r.inputs and f"planet_assembly.phase[{i}]" in r.inputs
+    others = [j for j, lab in enumerate(r.inputs) if lab.startswith("planet_") and not lab.endswith("[0]")]
+    if coupling == "single_path":
+        # Planet 1's path alone sets the output: the other planets' errors change nothing at all.
+        assert np.all(r.total_order[others] == 0) and np.all(r.first_order[others] == 0)
+    else:
+        assert np.all(r.total_order[others] > 0.001)
+
+
+def test_rule_bound_phases_are_not_inputs_and_follow_their_datum():
+    s = load_study(ROOT / "examples" / "planetary_wang2013_budget.toml")
+    r = sobol_indices(gearte.TEStudy(s.drive, s.errors), key=1, n=256)
+    # Table 3: γ_s = β_r + 7π/9, γ_c = β_r + 8π/9, γ_p = 0 — no phase inputs for the assembly errors.
+    assert not [lab for lab in r.inputs if lab.startswith(("sun_assembly.phase", "carrier_assembly.phase", "planet_assembly.phase"))]
+    assert "ring_manufacturing.phase" in r.inputs
+    # With the planet pin-hole phases at 0 the two constant terms cancel exactly: no influence at all.
+    assert r.source_total_order["planet_assembly"] == pytest.approx(0.0, abs=1e-12)
+    assert set(r.sources) == set(s.drive.error_sources)
+
+
+def test_reproducible_from_the_seed():
+    st = study([("a", 1, 0.0), ("b", 2, 0.0)], {"a": gearte.ErrorSource(gearte.Rayleigh(2.0), gearte.UniformPhase()),
+                                                 "b": gearte.ErrorSource(gearte.Normal(5.0, 1.0), gearte.UniformPhase())})
+    r1, r2 = sobol_indices(st, key=42, n=128), sobol_indices(st, key=42, n=128)
+    np.testing.assert_array_equal(r1.first_order, r2.first_order)
+    np.testing.assert_array_equal(r1.total_order, r2.total_order)
+    assert r1.source_total_order == r2.source_total_order
+    r3 = sobol_indices(st, key=43, n=128)
+    assert not np.array_equal(r1.first_order, r3.first_order)
+    k = jax.random.key(9)
+    np.testing.assert_array_equal(sobol_indices(st, key=k, n=64).total_order, sobol_indices(st, key=k, n=64).total_order)
+    # The block size changes how samples are batched, not which.
+    np.testing.assert_allclose(sobol_indices(st, key=42, n=128, block_size=100).total_order, r1.total_order, rtol=1e-10, atol=1e-12)
+
+
+def test_bootstrap_intervals():
+    # The additive case above (S_a = 0.2, S_b = 0.8) and a source c of zero magnitude whose random
+    # phase therefore changes nothing: its indices are 0 in every resample, a degenerate interval.
+    st = study([("a", 1, 0.0), ("b", 3, math.pi), ("c", 2, 0.0)],
+               {"a": gearte.ErrorSource(gearte.Uniform(0.0, 10.0), gearte.FixedPhase(0.0)),
+                "b": gearte.ErrorSource(gearte.Uniform(5.0, 25.0), gearte.FixedPhase(0.0)),
+                "c": gearte.ErrorSource(0.0, gearte.UniformPhase())})
+    r = sobol_indices(st, key=2, n=256, confidence_level=0.9, n_resamples=200)
+    assert r.inputs == ("a.magnitude", "b.magnitude", "c.phase")
+    assert r.first_order_ci.shape == (3, 2) and r.total_order_ci.shape == (3, 2)
+    assert np.all(r.first_order_ci[:, 0] <= r.first_order_ci[:, 1])
+    assert r.first_order_ci[0, 0] < 0.2 < r.first_order_ci[0, 1]
+    assert r.total_order_ci[1, 0] < 0.8 < r.total_order_ci[1, 1]
+    np.testing.assert_allclose(r.total_order_ci[2], [0.0, 0.0], atol=1e-12)
+    again = sobol_indices(st, key=2, n=256, confidence_level=0.9, n_resamples=200)
+    np.testing.assert_array_equal(r.first_order_ci, again.first_order_ci)
+    d = r.to_dict()
+    assert d["inputs"]["a.magnitude"]["first_order_ci"] == [float(x) for x in r.first_order_ci[0]]
+
+
+def two_source_problem():
+    d = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 3)], gain=GAIN)
+    law = lambda t: gearte.Rayleigh(t / 2, truncate_at=t)
+    model = gearte.ErrorModel({"a": gearte.ErrorSource(law(10.0), gearte.UniformPhase()),
+                               "b": gearte.ErrorSource(law(20.0), gearte.UniformPhase())}, d.error_sources)
+    return budget_problem(d, model, costs={"a": gearte.Reciprocal(0.0, 1.0), "b": gearte.Reciprocal(0.0, 1.0)},
+                          nominal={"a": 10.0, "b": 20.0}, spec=20 * GAIN, target=0.99)
+
+
+def test_budget_problem_tolerances_scale_the_laws():
+    p = two_source_problem()
+    base = sobol_indices(p, key=4, n=512)
+    # TE is homogeneous of degree 1 in the tolerances: scaling them all leaves every index unchanged.
+    both = sobol_indices(p, key=4, n=512, tolerances={"a": 30.0, "b": 60.0})
+    np.testing.assert_allclose(both.first_order, base.first_order, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(both.mean, 3 * base.mean, rtol=1e-12)
+    # Loosening a alone moves the variance towards a.
+    a_loose = sobol_indices(p, key=4, n=512, tolerances={"a": 40.0, "b": 20.0})
+    assert a_loose.source_total_order["a"] > base.source_total_order["a"] + 0.2
+
+
+def test_sensitivity_table_puts_contributions_and_sobol_side_by_side():
+    p = two_source_problem()
+    tol = {"a": 10.0, "b": 20.0}
+    t = sensitivity_table(p, tol, key=6, n_sobol=256, n_samples=1024)
+    assert t.sources == ["a", "b"]
+    k_grad, k_sobol = jax.random.split(jax.random.key(6))
+    assert t.contribution == contributions(p, tol, key=k_grad, n_samples=1024)
+    np.testing.assert_array_equal(t.sobol.total_order, sobol_indices(p, key=k_sobol, n=256, tolerances=tol).total_order)
+    np.testing.assert_allclose(sum(r["contribution_rad"] for r in t.rows()), t.statistic, rtol=1e-12)
+    np.testing.assert_allclose(sum(r["share"] for r in t.rows()), 1.0, rtol=1e-12)
+    assert {r["source"]: r["sobol_total_order"] for r in t.rows()} == t.sobol.source_total_order
+    # b (twice the tolerance) owns more of both.
+    rows = {r["source"]: r for r in t.rows()}
+    assert rows["b"]["share"] > rows["a"]["share"] and rows["b"]["sobol_total_order"] > rows["a"]["sobol_total_order"]
+    json.dumps(t.to_dict())
+    text = t.format(unit="arcsec")
+    assert "″" in text and "a" in text.splitlines()[2]
+    with pytest.raises(ValueError, match="unit"):
+        t.format(unit="furlong")
+
+
+class NoInverse(gearte.AbstractMagnitude):
+    def sample(self, key, shape):
+        return jax.random.uniform(key, shape, dtype=float)
+
+    def describe(self):
+        return "no inverse CDF"
+
+
+def test_bad_inputs(monkeypatch):
+    good = study([("a", 1, 0.0)], {"a": gearte.ErrorSource(gearte.Rayleigh(1.0), gearte.UniformPhase())})
+    for n in (1000, 8, True, 64.0):
+        with pytest.raises(ValueError, match="power of 2"):
+            sobol_indices(good, key=0, n=n)
+    with pytest.raises(ValueError, match="only for a budget problem"):
+        sobol_indices(good, key=0, n=64, tolerances={"a": 1.0})
+    with pytest.raises(ValueError, match="TEStudy"):
+        sobol_indices(good.drive, key=0, n=64)
+    with pytest.raises(ValueError, match="seed"):
+        sobol_indices(good, key="zero", n=64)
+    with pytest.raises(ValueError, match="confidence_level"):
+        sobol_indices(good, key=0, n=64, confidence_level=95)
+    with pytest.raises(ValueError, match="block_size"):
+        sobol_indices(good, key=0, n=64, block_size=0)
+    p = two_source_problem()
+    with pytest.raises(ValueError, match="missing"):
+        sobol_indices(p, key=0, n=64, tolerances={"a": 1.0})
+    with pytest.raises(ValueError, match="unknown"):
+        sobol_indices(p, key=0, n=64, tolerances={"a": 1.0, "b": 1.0, "c": 1.0})
+    with pytest.raises(ValueError, match="> 0 µm"):
+        sobol_indices(p, key=0, n=64, tolerances={"a": 1.0, "b": -2.0})
+    with pytest.raises(ValueError, match="> 0 µm"):
+        sensitivity_table(p, {"a": 1.0, "b": float("nan")}, key=0)
+    with pytest.raises(ValueError, match="budget problem"):
+        sensitivity_table(good, key=0)
+    constant = study([("a", 1, 0.0)], {"a": gearte.ErrorSource(gearte.Uniform(3.0, 3.0), gearte.FixedPhase(0.1))})
+    with pytest.raises(ValueError, match="no random input"):
+        sobol_indices(constant, key=0, n=64)
+    with pytest.raises(ValueError, match="inverse CDF"):
+        sobol_indices(study([("a", 1, 0.0)], {"a": gearte.ErrorSource(NoInverse(), gearte.UniformPhase())}), key=0, n=64)
+    s = load_study(ROOT / "examples" / "planetary_wang2013_allocate.toml")
+    with pytest.raises(ValueError, match="allocation optimiser"):
+        sobol_indices(gearte.TEStudy(s.drive, s.errors), key=0, n=64)
+    # scipy is optional at run time: say how to get it.
+    monkeypatch.setitem(sys.modules, "scipy", None)
+    with pytest.raises(ImportError, match=r"gearte\[sensitivity\]"):
+        sobol_indices(good, key=0, n=64)
