@@ -17,7 +17,7 @@ carrier output and ring fixed it is the seed's ``Δθ_sc = (e_w + e_n)/(2 a cos 
 
 Kinematics are computed from the tooth counts (Willis), so the planet terms of the
 seed's example are at |ω_p − ω_c| = 7/24 ω_s, not the 11/24 printed in its eq. (9)
-(see `wang2013_eq9` for the literal equation).
+(see `wang2013.eq9_drive` for the literal equation).
 """
 
 from __future__ import annotations
