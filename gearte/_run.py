@@ -350,7 +350,7 @@ def _budget_report(study: Study, s: dict) -> str:
     lines = ["## Tolerance budget", "",
              f"Cheapest tolerances with {cons}. Magnitudes are tolerance × a standard draw of each source's law "
              f"(common random numbers, {b['optimisation_samples']:,} samples, smoothed quantile); the budget is then scaled on a fresh "
-             f"sample to clear the target by three binomial standard errors and verified on another fresh sample of "
+             f"sample to clear the target by four binomial standard errors and verified on another fresh sample of "
              f"{b['verified_samples']:,}. Every source's tolerance is capped at 10 × nominal (`maximum_factor`). "
              f"Solver converged: {b['solver_converged']}.", "",
              f"| source | nominal (µm) | optimised (µm) | uniform scaling (µm) | ISO grade | cost model | share of the statistic ({sym}) |",
