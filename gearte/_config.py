@@ -361,6 +361,32 @@ def read_toml(path: Path) -> dict:
         raise ConfigError(f"{path}: not valid TOML: {e}") from None
 
 
+def study_header(st: _Table, *, samples: int | None, seed: int | None) -> dict:
+    """The keys every study file's [study] table has, with the command line's overrides.
+
+    Reads name, title, description, samples, seed, chunk_size and notes; the caller reads its
+    own further keys and then calls ``st.finish()``.
+    """
+    name = st.string("name")
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
+        raise ConfigError(f"[study] name: use letters, digits, '_', '.', '-' only, got {name!r}")
+    n = st.integer("samples", DEFAULT_SAMPLES, minimum=1)
+    s = st.integer("seed", minimum=0)
+    notes = st.get("notes", [])
+    if not isinstance(notes, list) or not all(isinstance(x, str) for x in notes):
+        raise ConfigError("[study] notes: expected a list of strings")
+    if samples is not None:
+        if samples < 1:
+            raise ConfigError(f"--samples: must be ≥ 1, got {samples}")
+        n = samples
+    if seed is not None:
+        if seed < 0:
+            raise ConfigError(f"--seed: must be ≥ 0, got {seed}")
+        s = seed
+    return {"name": name, "title": st.string("title", name), "description": st.string("description", ""), "samples": n, "seed": s,
+            "chunk_size": st.integer("chunk_size", None, minimum=1) if st.has("chunk_size") else None, "notes": notes}
+
+
 def load_study(path: str | Path, *, samples: int | None = None, seed: int | None = None) -> Study:
     """Read and validate a study file; `samples` and `seed` override the file's values."""
     path = Path(path)
@@ -374,28 +400,11 @@ def load_study(path: str | Path, *, samples: int | None = None, seed: int | None
 def _build(raw: dict, source: str, *, samples: int | None, seed: int | None) -> Study:
     top = _Table(raw, "config")
     st = top.table("study")
-    name = st.string("name")
-    if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
-        raise ConfigError(f"[study] name: use letters, digits, '_', '.', '-' only, got {name!r}")
-    title = st.string("title", name)
-    description = st.string("description", "")
+    h = study_header(st, samples=samples, seed=seed)
+    name, title, description, n, s, chunk, notes_raw = (h[k] for k in ("name", "title", "description", "samples", "seed", "chunk_size", "notes"))
     metric = st.string("metric", "peak", choices=("peak", "peak_to_peak", "rms"))
-    n = st.integer("samples", DEFAULT_SAMPLES, minimum=1)
-    s = st.integer("seed", minimum=0)
     unit = st.string("unit", "arcsec", choices=("arcsec", "arcmin", "urad"))
-    chunk = st.integer("chunk_size", None, minimum=1) if st.has("chunk_size") else None
-    notes_raw = st.get("notes", [])
-    if not isinstance(notes_raw, list) or not all(isinstance(x, str) for x in notes_raw):
-        raise ConfigError("[study] notes: expected a list of strings")
     st.finish()
-    if samples is not None:
-        if samples < 1:
-            raise ConfigError(f"--samples: must be ≥ 1, got {samples}")
-        n = samples
-    if seed is not None:
-        if seed < 0:
-            raise ConfigError(f"--seed: must be ≥ 0, got {seed}")
-        s = seed
 
     dt = top.table("drive")
     kind = dt.string("type", choices=tuple(DRIVES))

@@ -28,7 +28,6 @@ import dataclasses
 import datetime as _dt
 import math
 import platform
-import re
 import time
 import tomllib
 import warnings
@@ -38,10 +37,10 @@ from typing import Any
 import jax
 import numpy as np
 
-from ._config import ConfigError, _Table, read_toml
+from ._config import ConfigError, _Table, read_toml, study_header
 from ._distributions import FixedPhase, Normal, Rayleigh, TruncatedNormal, UniformPhase
 from ._io import atomic_output_dir, write_json
-from ._montecarlo import DEFAULT_SAMPLES, monte_carlo, statistics
+from ._montecarlo import monte_carlo, statistics
 from .drives.cycloid_pin import (ERROR_FIELDS, PER_PIN, PER_SPACE, CycloidErrors, CycloidPin, CycloidModification, clearances,
                                  loaded_pairs, pitch_angles, revolution_angles, sweep, theoretical_pairs)
 from .drives.cycloid_pin_studies import (CycloidStudy, CycloidTolerances, Exactly, SignedUniform, Sinusoid, sensitivities,
@@ -120,26 +119,9 @@ def load_cycloid_study(path: str | Path, *, samples: int | None = None, seed: in
 def _build(raw: dict, source: str, *, samples: int | None, seed: int | None) -> CycloidStudyConfig:
     top = _Table(raw, "config")
     st = top.table("study")
-    name = st.string("name")
-    if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
-        raise ConfigError(f"[study] name: use letters, digits, '_', '.', '-' only, got {name!r}")
-    title = st.string("title", name)
-    description = st.string("description", "")
-    n = st.integer("samples", DEFAULT_SAMPLES, minimum=1)
-    s = st.integer("seed", minimum=0)
-    chunk = st.integer("chunk_size", None, minimum=1) if st.has("chunk_size") else None
-    notes = st.get("notes", [])
-    if not isinstance(notes, list) or not all(isinstance(x, str) for x in notes):
-        raise ConfigError("[study] notes: expected a list of strings")
+    h = study_header(st, samples=samples, seed=seed)
+    name, title, description, n, s, chunk, notes = (h[k] for k in ("name", "title", "description", "samples", "seed", "chunk_size", "notes"))
     st.finish()
-    if samples is not None:
-        if samples < 1:
-            raise ConfigError(f"--samples: must be ≥ 1, got {samples}")
-        n = samples
-    if seed is not None:
-        if seed < 0:
-            raise ConfigError(f"--seed: must be ≥ 0, got {seed}")
-        s = seed
 
     drive = _drive(top.table("drive"))
 
