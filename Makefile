@@ -5,11 +5,11 @@ BIN     = $(VENV)/bin
 STAMP   = $(VENV)/.installed
 OUT    ?= out
 
-.PHONY: demo test bench clean help
+.PHONY: demo test lint bench clean help
 
 help:
 	@echo "make demo   - set up .venv, run the flagship planetary study, write a report under $(OUT)/"
-	@echo "make test   - set up .venv and run the whole test suite (notebooks included)"
+	@echo "make test   - set up .venv, check lint (ruff) and types (basedpyright), run the whole test suite (notebooks included)"
 	@echo "make bench  - run the benchmarks, tables in benchmarks/results/"
 
 $(STAMP): pyproject.toml
@@ -28,7 +28,11 @@ demo: $(STAMP)
 	@echo "Demo finished. Open $(OUT)/comparison/report.md (plots beside it);"
 	@echo "each study's own report is $(OUT)/<study>/report.md."
 
-test: $(STAMP)
+lint: $(STAMP)
+	$(BIN)/ruff check gearte tests benchmarks
+	$(BIN)/basedpyright --level error
+
+test: lint
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)

@@ -1,37 +1,13 @@
-"""gearte: transmission error of precision gear drives from their manufacturing and assembly errors."""
+"""gearte: transmission error of precision gear drives from their manufacturing and assembly errors.
 
-from . import _precision  # noqa: F401  (turns on float64 unless GEARTE_X64=0; see _precision)
-from ._distributions import (
-    AbstractMagnitude as AbstractMagnitude,
-    AbstractPhase as AbstractPhase,
-    Fixed as Fixed,
-    FixedPhase as FixedPhase,
-    Normal as Normal,
-    Rayleigh as Rayleigh,
-    RelativePhase as RelativePhase,
-    TruncatedNormal as TruncatedNormal,
-    Uniform as Uniform,
-    UniformPhase as UniformPhase,
-)
-from ._costs import (
-    AbstractCostModel as AbstractCostModel,
-    Exponential as Exponential,
-    GradeTable as GradeTable,
-    Power as Power,
-    Reciprocal as Reciprocal,
-    ReciprocalSquare as ReciprocalSquare,
-)
-from ._errors import Eccentricity as Eccentricity, ErrorModel as ErrorModel, ErrorSource as ErrorSource
-from ._iso1328 import (
-    eccentricity_from_runout as eccentricity_from_runout,
-    grade_for_tolerance as grade_for_tolerance,
-    grade_range as grade_range,
-    iso1328_tolerance as iso1328_tolerance,
-    iso1328_tolerances as iso1328_tolerances,
-    nearest_grade as nearest_grade,
-    round_tolerance as round_tolerance,
-)
-from ._metrics import (
+Importing gearte changes no global state. gearte needs JAX's 64-bit mode: call
+``jax.config.update("jax_enable_x64", True)`` (or `gearte.enable_x64()`) once, before
+building arrays; the `gearte` command does it itself.
+"""
+
+from . import drives as drives
+from .core import units as units
+from .core.extrema import (
     Extrema as Extrema,
     Spectrum as Spectrum,
     extrema as extrema,
@@ -40,24 +16,10 @@ from ._metrics import (
     rms as rms,
     smooth_peak as smooth_peak,
     spectrum as spectrum,
-    te_metric as te_metric,
 )
-from ._montecarlo import (
-    MonteCarloResult as MonteCarloResult,
-    Statistics as Statistics,
-    TEStudy as TEStudy,
-    monte_carlo as monte_carlo,
-    statistics as statistics,
-)
-from ._precision import require_x64 as require_x64, x64_enabled as x64_enabled
-from ._sensitivity import (
-    SensitivityTable as SensitivityTable,
-    SobolIndices as SobolIndices,
-    sensitivity_table as sensitivity_table,
-    sobol_indices as sobol_indices,
-)
-from ._signal import Components as Components, TESignal as TESignal, as_frequency as as_frequency, evaluate as evaluate, to_signal as to_signal
-from ._records import (
+from .core.metrics import AbstractMetric as AbstractMetric, Peak as Peak, PeakToPeak as PeakToPeak, RMS as RMS
+from .core.precision import enable_x64 as enable_x64, require_x64 as require_x64, x64_enabled as x64_enabled
+from .core.records import (
     Record as Record,
     RecordSpectrum as RecordSpectrum,
     SpectralLines as SpectralLines,
@@ -67,16 +29,92 @@ from ._records import (
     record_spectrum as record_spectrum,
     spectral_lines as spectral_lines,
 )
-from ._twoscale import TwoScaleExtrema as TwoScaleExtrema, extrema_two_scale as extrema_two_scale
-from . import drives as drives, units as units
-from .drives import ExplicitDrive as ExplicitDrive, ExplicitTerm as ExplicitTerm, Planetary2KH as Planetary2KH
-from .drives import HarmonicDrive as HarmonicDrive, HarmonicSource as HarmonicSource
-from .drives import (
-    CycloidErrors as CycloidErrors,
-    CycloidModification as CycloidModification,
-    CycloidPin as CycloidPin,
-    CycloidStudy as CycloidStudy,
-    CycloidTolerances as CycloidTolerances,
+from .core.schema import ConfigError as ConfigError
+from .core.signal import (
+    Components as Components,
+    TESignal as TESignal,
+    as_frequency as as_frequency,
+    evaluate as evaluate,
+    to_signal as to_signal,
 )
+from .core.solution import RESULTS as RESULTS
+from .core.twoscale import TwoScaleExtrema as TwoScaleExtrema, extrema_two_scale as extrema_two_scale
+from .drives import (
+    AbstractDrive as AbstractDrive,
+    AbstractGridDrive as AbstractGridDrive,
+    AbstractSinusoidalDrive as AbstractSinusoidalDrive,
+    Eccentricity as Eccentricity,
+    ExplicitDrive as ExplicitDrive,
+    ExplicitTerm as ExplicitTerm,
+    Planetary2KH as Planetary2KH,
+    SourceSpec as SourceSpec,
+)
+from .optimise.allocation import (
+    MeasuredAllocation as MeasuredAllocation,
+    RuleAllocation as RuleAllocation,
+    RuleProblem as RuleProblem,
+    allocate_measured as allocate_measured,
+    allocate_rule as allocate_rule,
+    evaluate_rule as evaluate_rule,
+    expected as expected,
+    rule_problem as rule_problem,
+    worst_case as worst_case,
+)
+from .optimise.budget import (
+    AbstractStatistic as AbstractStatistic,
+    BudgetProblem as BudgetProblem,
+    BudgetResult as BudgetResult,
+    Constraint as Constraint,
+    MeanKSigma as MeanKSigma,
+    Yield as Yield,
+    budget_problem as budget_problem,
+    contributions as contributions,
+    optimise_budget as optimise_budget,
+    pareto_front as pareto_front,
+    smooth_quantile as smooth_quantile,
+    uniform_scaling as uniform_scaling,
+)
+from .optimise.costs import (
+    AbstractCostModel as AbstractCostModel,
+    Exponential as Exponential,
+    GradeTable as GradeTable,
+    Power as Power,
+    Reciprocal as Reciprocal,
+    ReciprocalSquare as ReciprocalSquare,
+)
+from .optimise.sensitivity_table import SensitivityTable as SensitivityTable, sensitivity_table as sensitivity_table
+from .standards.iso1328 import (
+    eccentricity_from_runout as eccentricity_from_runout,
+    grade_for_tolerance as grade_for_tolerance,
+    grade_range as grade_range,
+    iso1328_tolerance as iso1328_tolerance,
+    iso1328_tolerances as iso1328_tolerances,
+    nearest_grade as nearest_grade,
+    round_tolerance as round_tolerance,
+)
+from .studies.errors import ErrorModel as ErrorModel, ErrorSource as ErrorSource
+from .studies.laws import (
+    AbstractLaw as AbstractLaw,
+    AbstractPhase as AbstractPhase,
+    AbstractValueLaw as AbstractValueLaw,
+    Fixed as Fixed,
+    FixedPhase as FixedPhase,
+    Normal as Normal,
+    Optimised as Optimised,
+    Rayleigh as Rayleigh,
+    RelativePhase as RelativePhase,
+    Sinusoid as Sinusoid,
+    TruncatedNormal as TruncatedNormal,
+    Uniform as Uniform,
+    UniformPhase as UniformPhase,
+)
+from .studies.montecarlo import (
+    MonteCarloResult as MonteCarloResult,
+    Statistics as Statistics,
+    TEStudy as TEStudy,
+    monte_carlo as monte_carlo,
+    statistics as statistics,
+)
+from .studies.sensitivity import SobolIndices as SobolIndices, sobol_indices as sobol_indices
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

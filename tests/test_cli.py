@@ -12,7 +12,8 @@ import pytest
 
 import gearte
 from gearte import cli
-from gearte._config import ConfigError, load_study, parse_angle
+from gearte.cli import plots
+from gearte.cli.config import ConfigError, load_study, parse_angle
 
 ROOT = Path(__file__).resolve().parents[1]
 # Plain Monte Carlo studies; allocation and budget studies have their own tests (test_allocation, test_budget).
@@ -22,6 +23,28 @@ RANDOM = ROOT / "examples" / "planetary_wang2013_random.toml"
 
 def run(*args):
     return cli.main([str(a) for a in args])
+
+
+def test_importing_gearte_changes_no_global_state():
+    code = ("import jax, sys; before = jax.config.read('jax_enable_x64'); import gearte, gearte.cli; "
+            "assert jax.config.read('jax_enable_x64') == before == False, 'x64 changed'; "
+            "assert 'matplotlib.pyplot' not in sys.modules, 'pyplot imported'; "
+            "import matplotlib; assert matplotlib.get_backend() is not None; print('ok')")
+    env = {k: v for k, v in os.environ.items() if k not in ("JAX_ENABLE_X64", "MPLBACKEND")}
+    env["PYTHONPATH"] = str(ROOT)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert p.returncode == 0 and p.stdout.strip() == "ok", p.stderr
+
+
+def test_library_entry_points_refuse_float32_clearly():
+    code = ("import gearte, jax.numpy as jnp; from gearte.drives import wang2013\n"
+            "d = wang2013.table1_drive(); m = gearte.ErrorModel({n: gearte.ErrorSource(gearte.Fixed(t), gearte.UniformPhase()) "
+            "for n, t in wang2013.TABLE1_TOLERANCES_UM.items()}, d.error_sources)\n"
+            "try:\n    gearte.monte_carlo(gearte.TEStudy(d, m), key=1, n_samples=8)\nexcept RuntimeError as e:\n    print(e)")
+    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
+    env["PYTHONPATH"] = str(ROOT)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert p.returncode == 0 and "jax_enable_x64" in p.stdout, p.stdout + p.stderr
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
@@ -129,12 +152,10 @@ def test_failed_run_leaves_nothing_and_keeps_the_previous_result(tmp_path, monke
     assert run("run", RANDOM, "--out", out, "--samples", 200) == 0
     before = (out / "summary.json").read_text()
 
-    from gearte import plotting
-
     def boom(*a, **k):
         raise KeyboardInterrupt("simulated Ctrl-C while writing plots")
 
-    monkeypatch.setattr(plotting, "trace", boom)
+    monkeypatch.setattr(plots, "trace", boom)
     assert run("run", RANDOM, "--out", out, "--samples", 300) == 130
     assert (out / "summary.json").read_text() == before  # untouched
     assert sorted(p.name for p in tmp_path.iterdir()) == ["res"]  # no partial folders left
@@ -175,3 +196,5 @@ def test_real_command_line_entry_point(tmp_path):
     p = subprocess.run([sys.executable, "-m", "gearte", "run", str(RANDOM), "--out", str(tmp_path / "o"), "--samples", "0"],
                        capture_output=True, text=True, env=env)
     assert p.returncode == 2 and "--samples" in p.stderr
+    p = subprocess.run([sys.executable, "-m", "gearte", "--version"], capture_output=True, text=True, env=env)
+    assert p.returncode == 0 and p.stdout.strip() == f"gearte {gearte.__version__}"

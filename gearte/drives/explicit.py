@@ -8,15 +8,16 @@ from __future__ import annotations
 
 import math
 from fractions import Fraction
-from typing import Mapping, Sequence
+from typing import ClassVar, Mapping, Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._errors import Eccentricity
-from .._signal import Components, FrequencyLike, as_frequency
-from ._base import AbstractDrive
+from ..core.schema import ConfigError, Table
+from ..core.signal import Components, FrequencyLike, as_frequency
+from ..core.units import ARCSEC_PER_RAD
+from .protocol import AbstractSinusoidalDrive, Eccentricity, SourceSpec
 
 
 class ExplicitTerm(eqx.Module):
@@ -46,7 +47,7 @@ class ExplicitTerm(eqx.Module):
         self.scale = jnp.asarray(float(scale))
 
 
-class ExplicitDrive(AbstractDrive):
+class ExplicitDrive(AbstractSinusoidalDrive):
     """TE given as explicit sinusoidal terms of named error sources.
 
     **Arguments:**
@@ -69,19 +70,48 @@ class ExplicitDrive(AbstractDrive):
         self.gain = jnp.asarray(float(gain))
         self.name = name
 
+    type_name: ClassVar[str] = "explicit"
+
     @property
-    def error_sources(self) -> dict[str, int]:
-        return {t.source: 1 for t in self.terms}
+    def error_sources(self) -> dict[str, SourceSpec]:
+        return {t.source: SourceSpec(t.source, "eccentricity") for t in self.terms}
+
+    @classmethod
+    def from_table(cls, table: Table) -> "ExplicitDrive":
+        """``[drive] type = "explicit"``: gain_rad_per_um, optional name, and a list of ``[[drive.terms]]``
+        (source, frequency as a number or a fraction string, optional phase_sign ±1, offset_deg/_rad, scale)."""
+        t = table
+        gain = t.number("gain_rad_per_um")
+        name = t.string("name", "explicit components")
+        raw = t.get("terms")
+        if not isinstance(raw, list) or not raw:
+            raise ConfigError(f"{t.where} terms: give a list of [[drive.terms]] tables (source, frequency, phase_sign, offset_rad)")
+        terms = []
+        for i, item in enumerate(raw):
+            tt = Table(item, f"[[drive.terms]] #{i + 1}")
+            freq = tt.get("frequency")
+            if isinstance(freq, bool) or not isinstance(freq, (int, float, str)):
+                raise ConfigError(f"{tt.where} frequency: expected a number or a fraction string like '7/24'")
+            try:
+                terms.append(ExplicitTerm(tt.string("source"), freq, phase_sign=tt.integer("phase_sign", 1),
+                                          offset=tt.angle("offset", 0.0), scale=tt.number("scale", 1.0)))
+            except ValueError as e:
+                raise ConfigError(f"{tt.where}: {e}") from None
+            tt.finish()
+        try:
+            return cls(terms, gain=gain, name=name)
+        except ValueError as e:
+            raise ConfigError(f"{t.where}: {e}") from None
 
     def components(self, errors: Mapping[str, Eccentricity]) -> Components:
-        e = self._checked(errors)
+        e = self.checked(errors)
         amp = jnp.stack([t.scale * e[t.source].magnitude[0] for t in self.terms], axis=-1)
         phase = jnp.stack([t.phase_sign * e[t.source].phase[0] + t.offset for t in self.terms], axis=-1)
         labels = [f"{t.source} ({t.frequency})" for t in self.terms]
         return Components(amp, phase, [t.frequency for t in self.terms], gain=self.gain, labels=labels)
 
     def describe(self) -> list[tuple[str, str]]:
-        rows = [("drive", self.name), ("gain", f"{float(self.gain) * 206264.80624709636:.6g}″/µm")]
+        rows = [("drive", self.name), ("gain", f"{float(self.gain) * ARCSEC_PER_RAD:.6g}″/µm")]
         for t in self.terms:
             sign = "+" if t.phase_sign > 0 else "−"
             rows.append((f"term {t.source}", f"{float(t.scale):g}·E sin({t.frequency}·θ {sign} φ + {float(t.offset):.6g})"))

@@ -24,16 +24,17 @@ from __future__ import annotations
 
 import math
 from fractions import Fraction
-from typing import Mapping, Sequence
+from typing import ClassVar, Mapping, Sequence
 
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._errors import Eccentricity
-from .._signal import Components
-from ._base import AbstractDrive
-from .._validate import as_float, as_int
+from ..core.schema import ConfigError, Table
+from ..core.signal import Components
+from ..core.units import ARCSEC_PER_RAD
+from ..core.validate import as_float, as_int
+from .protocol import AbstractSinusoidalDrive, Eccentricity, SourceSpec
 
 MEMBERS = ("sun", "carrier", "ring")
 COUPLINGS = ("single_path", "load_sharing")
@@ -69,7 +70,7 @@ def member_speeds(z_sun: int, z_ring: int, *, input: str, fixed: str) -> dict[st
     return w
 
 
-class Planetary2KH(AbstractDrive):
+class Planetary2KH(AbstractSinusoidalDrive):
     """2K-H planetary train with eccentricity errors (seed 000).
 
     **Arguments:**
@@ -177,13 +178,44 @@ class Planetary2KH(AbstractDrive):
         self.planet_angles = jnp.asarray(angles)
         self.input, self.output, self.fixed, self.coupling = input, output, fixed, coupling
 
-    @property
-    def error_sources(self) -> dict[str, int]:
-        return {name: (self.n_planets if per_planet else 1) for name, (_, per_planet) in SOURCES.items()}
+    type_name: ClassVar[str] = "planetary_2kh"
 
     @property
-    def phase_symbols(self) -> dict[str, str]:
-        return {name: sym for name, (sym, _) in SOURCES.items()}
+    def error_sources(self) -> dict[str, SourceSpec]:
+        return {name: SourceSpec(name, "eccentricity", shape=(self.n_planets if per_planet else 1,), symbol=sym,
+                                 description=name.replace("_", " ") + " eccentricity" + (", one per planet" if per_planet else ""))
+                for name, (sym, per_planet) in SOURCES.items()}
+
+    @classmethod
+    def from_table(cls, table: Table) -> "Planetary2KH":
+        """``[drive] type = "planetary_2kh"``: z_sun, z_planet, z_ring, module_mm, n_planets; optional
+        pressure_angle_deg/_rad (20°), planet_angles_deg/_rad, centre_distance_mm, input ("sun"),
+        output ("carrier"), fixed ("ring"), coupling ("single_path" or "load_sharing")."""
+        t = table
+        angles = None
+        if t.has("planet_angles_deg") or t.has("planet_angles_rad"):
+            key = "planet_angles_deg" if t.has("planet_angles_deg") else "planet_angles_rad"
+            raw = t.get(key)
+            if not isinstance(raw, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in raw):
+                raise ConfigError(f"{t.where} {key}: expected a list of numbers")
+            angles = [math.radians(x) if key.endswith("deg") else float(x) for x in raw]
+        centre = t.number("centre_distance_mm", None, positive=True) if t.has("centre_distance_mm") else None
+        kwargs = dict(
+            module=t.number("module_mm", positive=True),
+            pressure_angle=t.angle("pressure_angle", math.radians(20.0)),
+            n_planets=t.integer("n_planets", minimum=1),
+            planet_angles=angles,
+            centre_distance=centre,
+            input=t.string("input", "sun", choices=MEMBERS),
+            output=t.string("output", "carrier", choices=MEMBERS),
+            fixed=t.string("fixed", "ring", choices=MEMBERS),
+            coupling=t.string("coupling", "single_path", choices=COUPLINGS),
+        )
+        zs, zp, zr = (t.integer(k, minimum=1) for k in ("z_sun", "z_planet", "z_ring"))
+        try:
+            return cls(zs, zp, zr, **kwargs)
+        except ValueError as e:
+            raise ConfigError(f"{t.where}: {e}") from None
 
     @property
     def speeds(self) -> dict[str, Fraction]:
@@ -219,7 +251,7 @@ class Planetary2KH(AbstractDrive):
 
     def components(self, errors: Mapping[str, Eccentricity]) -> Components:
         """TE components at the output (seed Table 2, every planet path as the coupling mode says)."""
-        e = self._checked(errors)
+        e = self.checked(errors)
         f = self.source_frequencies()
         aw, an = self.working_angle_external, self.working_angle_internal
         paths = range(self.n_planets) if self.coupling == "load_sharing" else range(1)
@@ -252,7 +284,7 @@ class Planetary2KH(AbstractDrive):
     def describe(self) -> list[tuple[str, str]]:
         w = self.speeds
         rows = [
-            ("drive", "2K-H planetary (seed 000: Wang et al. 2013)"),
+            ("drive", "2K-H planetary (Wang et al. 2013)"),
             ("tooth counts z_sun / z_planet / z_ring", f"{self.z_sun} / {self.z_planet} / {self.z_ring}"),
             ("module", f"{float(self.module):g} mm"),
             ("pressure angle α₀", f"{math.degrees(float(self.pressure_angle)):.6g}°"),
@@ -264,7 +296,7 @@ class Planetary2KH(AbstractDrive):
             ("speeds (× input): sun, carrier, ring, planet", ", ".join(f"{w[k]}" for k in ("sun", "carrier", "ring", "planet"))),
             ("planet coupling", {"single_path": "single path: planet 1's path alone (seed's assumption)",
                                  "load_sharing": "equal load sharing: mean of the N planet paths"}[self.coupling]),
-            ("output error per µm of (e_w + e_n)", f"{float(self._gain()) * 206264.80624709636:.6g}″/µm"),
+            ("output error per µm of (e_w + e_n)", f"{float(self._gain()) * ARCSEC_PER_RAD:.6g}″/µm"),
         ]
         rows += [(f"frequency of {k} on the LOA (× input speed)", str(v)) for k, v in self.source_frequencies().items()]
         return rows

@@ -31,8 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._iso1328 import _GRADES, _standard, grade_for_tolerance, iso1328_tolerance
-from ._validate import as_float
+from ..standards.iso1328 import GRADES, check_standard, grade_for_tolerance, iso1328_tolerance
+from ..core.validate import as_float
 
 
 def _coef(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
@@ -226,14 +226,14 @@ class GradeTable(AbstractCostModel):
         face_width: float | None = None,
         teeth: int | None = None,
     ):
-        standard = _standard(standard)
+        standard = check_standard(standard)
         # Validates the quantity and the gear once, here.
         iso1328_tolerance(quantity, standard=standard, module=module, diameter=diameter,
                           face_width=face_width, grade=5.0, teeth=teeth)
         if not isinstance(costs_by_grade, Mapping) or len(costs_by_grade) < 2:
             raise ValueError("GradeTable.costs_by_grade: expected a mapping {grade: cost} with at least two grades, "
                              f"got {costs_by_grade!r}")
-        lo, hi = _GRADES[standard]
+        lo, hi = GRADES[standard]
         items = []
         for g, c in costs_by_grade.items():
             if isinstance(g, bool) or not (isinstance(g, numbers.Integral) or (isinstance(g, float) and g.is_integer())):

@@ -23,11 +23,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ._errors import ErrorModel
-from ._metrics import _grid_size, te_metric
-from ._precision import require_x64
-from ._progress import ProgressBar
-from .drives._base import AbstractDrive
+from tqdm import tqdm
+
+from ..core.metrics import AbstractMetric
+from ..core.precision import require_x64
+from ..drives.protocol import AbstractDrive
+from .errors import ErrorModel
 
 PERCENTILES = (1.0, 5.0, 50.0, 95.0, 99.0, 99.73)
 DEFAULT_SAMPLES = 50_000
@@ -45,40 +46,57 @@ def as_key(key: int | PRNGKeyArray) -> PRNGKeyArray:
 
 
 class TEStudy(eqx.Module):
-    """One Monte Carlo sample of a drive's TE: draw errors, build the TE, take a metric.
+    """One Monte Carlo sample of any drive: draw errors, take the drive's response, take metrics.
 
-    Callable as ``study(key) -> metric (rad)``.
+    Callable as ``study(key) -> value``: one metric gives a scalar (rad for angles), a tuple of
+    metrics a vector in that order.
 
     **Arguments:**
 
-    - `drive`: the drive model.
-    - `errors`: how every error source is drawn.
-    - `metric`: "peak", "peak_to_peak" or "rms".
+    - `drive`: the drive model (any `AbstractDrive`).
+    - `errors`: how every error source is drawn (an `ErrorModel` over ``drive.error_sources``).
+    - `metric`: a metric object the drive offers (`gearte.Peak()`, `gearte.PeakToPeak()`,
+      `gearte.LostMotion()`, …), or a tuple of them. Default: the drive's first metric.
     """
 
     drive: AbstractDrive
     errors: ErrorModel
-    metric: str = eqx.field(static=True)
+    metric: AbstractMetric | tuple[AbstractMetric, ...]
 
-    def __init__(self, drive: AbstractDrive, errors: ErrorModel, *, metric: str = "peak"):
-        if metric not in ("peak", "peak_to_peak", "rms"):
-            raise ValueError(f"metric: must be 'peak', 'peak_to_peak' or 'rms', got {metric!r}")
-        if errors.counts != drive.error_sources:
-            raise ValueError(f"errors: the error model's sources {errors.counts} do not match the drive's {drive.error_sources}")
+    def __init__(self, drive: AbstractDrive, errors: ErrorModel, *, metric: AbstractMetric | tuple[AbstractMetric, ...] | None = None):
+        if not isinstance(drive, AbstractDrive):
+            raise ValueError(f"drive: expected a gearte drive, got {type(drive).__name__}")
+        if not isinstance(errors, ErrorModel):
+            raise ValueError(f"errors: expected an ErrorModel, got {type(errors).__name__}")
+        if list(errors.specs) != list(drive.error_sources) or errors.specs != drive.error_sources:
+            raise ValueError(f"errors: the error model's sources {list(errors.specs)} do not match the drive's {list(drive.error_sources)}")
+        offered = drive.metrics
+        if metric is None:
+            metric = next(iter(offered.values()))
+        for m in (metric if isinstance(metric, tuple) else (metric,)):
+            if not isinstance(m, AbstractMetric):
+                raise ValueError(f"metric: expected a metric object such as gearte.Peak(), got {m!r}")
+            if m.name not in offered or type(offered[m.name]) is not type(m):
+                raise ValueError(f"metric: {type(drive).__name__} offers {list(offered)}, not {m.name!r}")
         self.drive, self.errors, self.metric = drive, errors, metric
 
-    def signal(self, key: PRNGKeyArray):
-        """The TE signal of the sample drawn with `key`."""
-        return self.drive.signal(self.errors.sample(key))
+    def response(self, key: PRNGKeyArray):
+        """The drive's response (e.g. the TE signal) of the sample drawn with `key`."""
+        return self.drive.response(self.errors.sample(key))
 
-    def __call__(self, key: PRNGKeyArray) -> Float[Array, ""]:
-        return te_metric(self.signal(key), self.metric)
+    def signal(self, key: PRNGKeyArray):
+        """Alias of `response` for sinusoidal drives: the TE signal of the sample drawn with `key`."""
+        return self.response(key)
+
+    def __call__(self, key: PRNGKeyArray) -> Float[Array, "..."]:
+        r = self.response(key)
+        if isinstance(self.metric, tuple):
+            return jnp.stack([m(self.drive, r) for m in self.metric])
+        return self.metric(self.drive, r)
 
     def bytes_per_sample(self) -> int:
-        """Rough peak working memory per sample (bytes), to size chunks."""
-        sig = jax.eval_shape(self.signal, jax.random.key(0))
-        m = _grid_size(sig.orders, 16) if sig.orders else 1
-        return 8 * (12 * m + 64 * len(sig.orders) + 256)
+        """Rough peak working memory per sample (bytes), to size blocks."""
+        return self.drive.bytes_per_sample()
 
 
 def sample_keys(key: PRNGKeyArray, start, size: int) -> PRNGKeyArray:
@@ -165,7 +183,7 @@ def monte_carlo(
         progress = n_calls > 1 and sys.stderr.isatty()
     t0 = time.perf_counter()
     parts = []
-    with ProgressBar(n_samples, desc=desc, enabled=progress) as bar:
+    with tqdm(total=n_samples, desc=desc, unit="samples", disable=not progress, leave=False) as bar:
         for c in range(n_calls):
             start = c * chunk
             # Every call has the same shape (one compilation); samples past n_samples are dropped.

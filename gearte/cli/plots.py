@@ -1,16 +1,20 @@
-"""Plots (matplotlib, headless). Kept apart from the numerics: the core never imports this."""
+"""Plots (matplotlib), kept apart from the numerics: nothing under gearte.core, drives, studies or optimise imports this.
+
+Every plot is drawn on its own `matplotlib.figure.Figure` and saved to a file, without pyplot:
+no backend is chosen and no global state is touched, so it works headless and beside a
+user's own plotting. Studies declare plots as `gearte.drives.Figure` (a function name here
+and its keyword arguments); the command line calls the function with ``path=``.
+"""
 
 from __future__ import annotations
 
 import math
 
 import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .units import UNIT_SYMBOLS  # noqa: E402
+from ..core.units import UNIT_SYMBOLS
 
 _METRIC_LABEL = {"peak": "peak |Δθ|", "peak_to_peak": "peak-to-peak Δθ", "rms": "RMS Δθ"}
 
@@ -18,7 +22,8 @@ _METRIC_LABEL = {"peak": "peak |Δθ|", "peak_to_peak": "peak-to-peak Δθ", "rm
 def histogram(values, stats, *, unit: str, metric: str, title: str, path, bins: int = 80, estimate: float | None = None):
     """TE histogram with its statistics written on it."""
     sym = UNIT_SYMBOLS[unit]
-    fig, ax = plt.subplots(figsize=(8, 4.8), dpi=110)
+    fig = Figure(figsize=(8, 4.8), dpi=110)
+    ax = fig.subplots()
     ax.hist(values, bins=bins, color="#4477aa", alpha=0.85, edgecolor="white", linewidth=0.3)
     for p, style in (("5", ":"), ("50", "--"), ("95", ":"), ("99.73", "-.")):
         ax.axvline(stats.percentiles[p], color="#222222", linestyle=style, linewidth=1.0, label=f"P{p} = {stats.percentiles[p]:.1f}{sym}")
@@ -34,13 +39,13 @@ def histogram(values, stats, *, unit: str, metric: str, title: str, path, bins: 
     ax.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def trace(theta_rev, te, *, unit: str, title: str, path, marks=()):
     """TE over the hyper-period against input revolutions; `marks` = [(rev, value, label)]."""
     sym = UNIT_SYMBOLS[unit]
-    fig, ax = plt.subplots(figsize=(9, 4), dpi=110)
+    fig = Figure(figsize=(9, 4), dpi=110)
+    ax = fig.subplots()
     ax.plot(theta_rev, te, color="#4477aa", linewidth=0.8)
     ax.axhline(0.0, color="#999999", linewidth=0.6)
     for x, y, label in marks:
@@ -52,13 +57,13 @@ def trace(theta_rev, te, *, unit: str, title: str, path, marks=()):
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def overlay_histograms(series, *, unit: str, metric: str, path, bins: int = 80):
     """Several studies' TE distributions on one axis; `series` = [(label, values)]."""
     sym = UNIT_SYMBOLS[unit]
-    fig, ax = plt.subplots(figsize=(9, 5), dpi=110)
+    fig = Figure(figsize=(9, 5), dpi=110)
+    ax = fig.subplots()
     lo = min(float(np.min(v)) for _, v in series)
     hi = max(float(np.max(v)) for _, v in series)
     edges = np.linspace(lo, hi, bins + 1) if hi > lo else bins
@@ -72,7 +77,6 @@ def overlay_histograms(series, *, unit: str, metric: str, path, bins: int = 80):
     ax.set_title("TE distributions compared", fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def grid_of_histograms(series, *, unit: str, metric: str, path, bins: int = 60):
@@ -83,7 +87,8 @@ def grid_of_histograms(series, *, unit: str, metric: str, path, bins: int = 60):
     rows = math.ceil(n / cols)
     lo = min(float(np.min(v)) for _, v in series)
     hi = max(float(np.max(v)) for _, v in series)
-    fig, axes = plt.subplots(rows, cols, figsize=(6 * cols, 3.6 * rows), dpi=100, squeeze=False, sharex=True)
+    fig = Figure(figsize=(6 * cols, 3.6 * rows), dpi=100)
+    axes = fig.subplots(rows, cols, squeeze=False, sharex=True)
     for ax, (label, v) in zip(axes.flat, series):
         ax.hist(v, bins=np.linspace(lo, hi, bins + 1) if hi > lo else bins, color="#4477aa", alpha=0.85)
         ax.set_title(label, fontsize=9)
@@ -95,7 +100,6 @@ def grid_of_histograms(series, *, unit: str, metric: str, path, bins: int = 60):
         ax.set_visible(False)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 # ---------------------------------------------------------------- harmonic drive: records, spectra, estimate
@@ -108,7 +112,8 @@ def record_with_envelope(time_s, te, *, envelopes=(), unit: str, title: str, pat
     boundaries, drawn as vertical lines.
     """
     sym = UNIT_SYMBOLS[unit]
-    fig, ax = plt.subplots(figsize=(10, 4.4), dpi=110)
+    fig = Figure(figsize=(10, 4.4), dpi=110)
+    ax = fig.subplots()
     ax.plot(time_s, te, color="#4477aa", linewidth=0.5, label="TE record")
     colors = ["#cc3311", "#228833", "#aa3377"]
     for (t, env, label), c in zip(envelopes, colors * 3):
@@ -125,7 +130,6 @@ def record_with_envelope(time_s, te, *, envelopes=(), unit: str, title: str, pat
     ax.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def labelled_spectrum(freq_cpm, amplitude, lines, *, unit: str, title: str, path, zooms=(), zoom_spectrum=None):
@@ -138,7 +142,8 @@ def labelled_spectrum(freq_cpm, amplitude, lines, *, unit: str, title: str, path
     """
     sym = UNIT_SYMBOLS[unit]
     panels = 1 + len(zooms)
-    fig, axes = plt.subplots(panels, 1, figsize=(10, 3.3 * panels), dpi=110, squeeze=False)
+    fig = Figure(figsize=(10, 3.3 * panels), dpi=110)
+    axes = fig.subplots(panels, 1, squeeze=False)
     freq_cpm, amplitude = np.asarray(freq_cpm), np.asarray(amplitude)
     top = float(np.max(amplitude))
     floor = max(top * 1e-6, 1e-30)
@@ -172,13 +177,13 @@ def labelled_spectrum(freq_cpm, amplitude, lines, *, unit: str, title: str, path
         ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def histogram_vs_estimate(values, stats, *, estimates, unit: str, metric: str, title: str, path, bins: int = 80):
     """Monte Carlo histogram with vertical lines for design estimates; `estimates` = [(value, label)]."""
     sym = UNIT_SYMBOLS[unit]
-    fig, ax = plt.subplots(figsize=(9, 4.8), dpi=110)
+    fig = Figure(figsize=(9, 4.8), dpi=110)
+    ax = fig.subplots()
     ax.hist(values, bins=bins, color="#4477aa", alpha=0.85, edgecolor="white", linewidth=0.3)
     for p, style in (("50", "--"), ("99.73", "-.")):
         ax.axvline(stats.percentiles[p], color="#222222", linestyle=style, linewidth=1.0, label=f"Monte Carlo P{p} = {stats.percentiles[p]:.2f}{sym}")
@@ -190,13 +195,13 @@ def histogram_vs_estimate(values, stats, *, estimates, unit: str, metric: str, t
     ax.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def trace_pair(theta_rev, te_a, te_b, *, unit: str, labels, title: str, path):
     """Two TE traces of the same parts over the hyper-period (e.g. before and after allocation)."""
     sym = UNIT_SYMBOLS[unit]
-    fig, ax = plt.subplots(figsize=(9, 4), dpi=110)
+    fig = Figure(figsize=(9, 4), dpi=110)
+    ax = fig.subplots()
     for te, label, c in ((te_a, labels[0], "#cc3311"), (te_b, labels[1], "#4477aa")):
         ax.plot(theta_rev, te, color=c, linewidth=0.9, label=f"{label}: peak {np.max(np.abs(te)):.1f}{sym}")
     ax.axhline(0.0, color="#999999", linewidth=0.6)
@@ -207,7 +212,6 @@ def trace_pair(theta_rev, te_a, te_b, *, unit: str, labels, title: str, path):
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 # ---------------------------------------------------------------- cycloid-pin reducer: clearances and rotation error
@@ -224,7 +228,8 @@ def cycloid_clearance_per_pin(tangential_mm, normal_mm, on_driving, *, budget_mm
     norm = np.asarray(normal_mm, dtype=float)
     drv = np.asarray(on_driving, dtype=bool)
     pins = np.arange(1, tang.size + 1)
-    fig, axes = plt.subplots(2, 1, figsize=(11, 7), dpi=110, sharex=True)
+    fig = Figure(figsize=(11, 7), dpi=110)
+    axes = fig.subplots(2, 1, sharex=True)
     colors = np.where(drv, "#4477aa", "#ee7733")
     finite = np.isfinite(tang)
     top = float(np.max(tang[finite])) if np.any(finite) else 1.0
@@ -252,7 +257,6 @@ def cycloid_clearance_per_pin(tangential_mm, normal_mm, on_driving, *, budget_mm
     ax.set_xticks(pins)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def cycloid_clearance_vs_input(input_deg, tangential_mm, normal_mm, pins, *, budget_mm: float, title: str, path):
@@ -263,8 +267,9 @@ def cycloid_clearance_vs_input(input_deg, tangential_mm, normal_mm, pins, *, bud
     x = np.asarray(input_deg, dtype=float)
     tang = np.asarray(tangential_mm, dtype=float)
     norm = np.asarray(normal_mm, dtype=float)
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5), dpi=110, sharex=True)
-    cmap = plt.get_cmap("viridis")
+    fig = Figure(figsize=(13, 5), dpi=110)
+    axes = fig.subplots(1, 2, sharex=True)
+    cmap = matplotlib.colormaps["viridis"]
     for k, p in enumerate(pins):
         c = cmap(k / max(1, len(pins) - 1))
         t = tang[:, p - 1]
@@ -283,7 +288,6 @@ def cycloid_clearance_vs_input(input_deg, tangential_mm, normal_mm, pins, *, bud
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def cycloid_rotation_error(input_rev, forward_arcsec, reverse_arcsec, *, title: str, path):
@@ -293,7 +297,8 @@ def cycloid_rotation_error(input_rev, forward_arcsec, reverse_arcsec, *, title: 
     f = np.asarray(forward_arcsec, dtype=float)
     r = np.asarray(reverse_arcsec, dtype=float)
     lm = (f - r) / 60.0
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6.4), dpi=110, sharex=True)
+    fig = Figure(figsize=(10, 6.4), dpi=110)
+    axes = fig.subplots(2, 1, sharex=True)
     ax = axes[0]
     ax.plot(x, f - f.mean(), color="#4477aa", linewidth=1.0,
             label=f"forward load: mean {f.mean():.1f}″, p-p {f.max() - f.min():.1f}″")
@@ -314,13 +319,13 @@ def cycloid_rotation_error(input_rev, forward_arcsec, reverse_arcsec, *, title: 
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def cycloid_distributions(series, *, title: str, path, bins: int = 60):
     """Monte Carlo histograms side by side; `series` = [(label, values, unit symbol)]."""
     n = len(series)
-    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), dpi=105, squeeze=False)
+    fig = Figure(figsize=(4.2 * n, 3.8), dpi=105)
+    axes = fig.subplots(1, n, squeeze=False)
     for ax, (label, v, sym) in zip(axes.flat, series):
         v = np.asarray(v, dtype=float)
         v = v[np.isfinite(v)]
@@ -337,7 +342,6 @@ def cycloid_distributions(series, *, title: str, path, bins: int = 60):
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def contributions(values: dict, *, unit: str, path, title: str):
@@ -345,7 +349,8 @@ def contributions(values: dict, *, unit: str, path, title: str):
     sym = UNIT_SYMBOLS[unit]
     names = list(values)
     v = np.array([values[n] for n in names])
-    fig, ax = plt.subplots(figsize=(8, 0.5 * len(names) + 1.5), dpi=110)
+    fig = Figure(figsize=(8, 0.5 * len(names) + 1.5), dpi=110)
+    ax = fig.subplots()
     ax.barh(names, v, color=["#4477aa" if x >= 0 else "#cc3311" for x in v])
     ax.axvline(0, color="#999999", linewidth=0.6)
     for i, x in enumerate(v):
@@ -355,14 +360,14 @@ def contributions(values: dict, *, unit: str, path, title: str):
     ax.invert_yaxis()
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
 
 
 def pareto(rows, *, unit: str, path):
     """Cost against TE spec: optimised budget and uniform scaling of the nominal tolerances."""
     sym = UNIT_SYMBOLS[unit]
     specs = [r[f"spec_{unit}"] for r in rows]
-    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=110)
+    fig = Figure(figsize=(7, 4.5), dpi=110)
+    ax = fig.subplots()
     ax.plot(specs, [r["cost"] for r in rows], "o-", color="#4477aa", label="optimised budget")
     ax.plot(specs, [r["baseline_cost"] for r in rows], "s--", color="#cc3311", label="uniform scaling of the nominal tolerances")
     ax.set_xlabel(f"TE specification ({sym})")
@@ -372,4 +377,3 @@ def pareto(rows, *, unit: str, path):
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)

@@ -42,7 +42,7 @@ from jaxtyping import Array, ArrayLike, Float
 STANDARDS: tuple[str, ...] = ("1328-1:2013", "1328-1:1995")
 QUANTITIES: tuple[str, ...] = ("f_pt", "F_p", "F_alpha", "F_beta", "F_r")
 
-_GRADES = {"1328-1:2013": (1, 11), "1328-1:1995": (0, 12)}
+GRADES = {"1328-1:2013": (1, 11), "1328-1:1995": (0, 12)}
 
 # ISO 1328-1:2013, scope: 0.5 ≤ m ≤ 70, 5 ≤ d ≤ 15000, 4 ≤ b ≤ 1200 (mm), 5 ≤ z ≤ 1000.
 _RANGE_2013 = {"module": (0.5, 70.0), "diameter": (5.0, 15000.0), "face_width": (4.0, 1200.0)}
@@ -58,7 +58,7 @@ _LIMITS_1995 = {
 _SYMBOL = {"module": "m", "diameter": "d", "face_width": "b"}
 
 
-def _standard(standard: str) -> str:
+def check_standard(standard: str) -> str:
     if standard not in STANDARDS:
         raise ValueError(f"standard: expected one of {', '.join(repr(s) for s in STANDARDS)}, got {standard!r}")
     return standard
@@ -114,11 +114,11 @@ def _teeth(teeth, standard: str) -> None:
 
 def grade_range(standard: str) -> tuple[int, int]:
     """Finest and coarsest whole grade of `standard`: (1, 11) for 2013, (0, 12) for 1995."""
-    return _GRADES[_standard(standard)]
+    return GRADES[check_standard(standard)]
 
 
 def _whole_grade(grade, standard: str) -> int:
-    lo, hi = _GRADES[standard]
+    lo, hi = GRADES[standard]
     if isinstance(grade, bool):
         raise ValueError(f"grade: expected a whole number from {lo} to {hi}, got {grade!r}")
     if isinstance(grade, numbers.Integral):
@@ -139,7 +139,7 @@ def _whole_grade(grade, standard: str) -> int:
 
 def _grade5(quantity: str, standard: str, module, diameter, face_width, teeth) -> float:
     """Validated, unrounded grade-5 value (µm) of one quantity."""
-    standard = _standard(standard)
+    standard = check_standard(standard)
     quantity = _quantity(quantity)
     m = _length("module", module, standard)
     d = _length("diameter", diameter, standard)
@@ -284,7 +284,7 @@ def iso1328_tolerances(
 
     **Returns:** `{"f_pt", "F_p", "F_alpha", ["F_beta",] "F_r"}` → tolerance, µm.
     """
-    standard = _standard(standard)
+    standard = check_standard(standard)
     q = _whole_grade(grade, standard)
     scale = 2.0 ** ((q - 5) / 2.0)
     out = {}
@@ -364,7 +364,7 @@ def nearest_grade(
     if not (math.isfinite(v) and v > 0):
         raise ValueError(f"value_um: a tolerance must be finite and > 0 µm, got {value_um!r}")
     base = _grade5(quantity, standard, module, diameter, face_width, teeth)
-    lo, hi = _GRADES[standard]
+    lo, hi = GRADES[standard]
     for q in range(hi, lo - 1, -1):
         if round_tolerance(base * 2.0 ** ((q - 5) / 2.0)) <= v:
             return q

@@ -36,3 +36,23 @@ def as_int(name: str, value, *, minimum: int) -> int:
     if value < minimum:
         raise ValueError(f"{name}: must be ≥ {minimum}, got {value}")
     return value
+
+
+def check_array_values(name: str, value, *, nonnegative: bool = False, unit: str = "") -> None:
+    """Check user-given numbers (Python numbers, lists, NumPy arrays): finite, and ≥ 0 if asked.
+
+    JAX arrays pass unchecked: they are computed inside gearte (and may be traced).
+    """
+    import jax
+
+    if isinstance(value, jax.Array):
+        return
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a number or an array of numbers, got {value!r}") from None
+    u = f" {unit}" if unit else ""
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: must be finite, got {value!r}")
+    if nonnegative and np.any(arr < 0):
+        raise ValueError(f"{name}: must be ≥ 0{u} (a magnitude cannot be negative; turn the phase by π instead), got {value!r}")

@@ -1,16 +1,17 @@
-"""Variance-based (Sobol') sensitivity of the per-sample TE to the error sources.
+"""Variance-based (Sobol') sensitivity of a per-sample metric to the error sources, for any drive.
 
 Every random part of an error model is one independent scalar *input*: the magnitude of
 each instance of a source whose magnitude law is not a constant, and the phase of each
 instance whose phase is uniform on [0, 2π) (random assembly). Phases set by a rule —
-`FixedPhase`, or `RelativePhase` (an assembly rule such as the planetary seed's
+`FixedPhase`, or `RelativePhase` (an assembly rule such as Wang et al.'s (2013)
 γ_s = β_r + 7π/9) — are not inputs: a rule-bound phase moves with the phase it follows,
 so its effect is attributed to that source's phase input. A per-planet source (N
 instances) gives N magnitude and N phase inputs.
 
 Each input is a standard uniform U on [0, 1) mapped through its law's inverse CDF in JAX
 (magnitude = F⁻¹(U) µm; phase = 2πU rad); the output Y is the exact TE metric of the
-sample (`gearte.te_metric`, rad), evaluated under `jax.vmap`.
+sample (the study's metric object, rad for angles), evaluated under `jax.vmap`. A deviation
+source (a signed value) gives one value input per instance, mapped the same way.
 
 **Design and estimator.** The two base matrices A and B (n × d each) are the two halves of
 one scrambled Sobol' sequence in 2d dimensions (Saltelli et al. 2010, Comput. Phys.
@@ -45,24 +46,12 @@ import numpy as np
 from jax.scipy.special import ndtr, ndtri
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ._budget import BudgetProblem, contributions
-from ._distributions import (
-    AbstractMagnitude,
-    Fixed,
-    FixedPhase,
-    Normal,
-    Optimised,
-    Rayleigh,
-    RelativePhase,
-    TruncatedNormal,
-    Uniform,
-    UniformPhase,
-)
-from ._errors import Eccentricity, ErrorModel
-from ._metrics import te_metric
-from ._montecarlo import TEStudy, as_key
-from ._precision import require_x64
-from .drives._base import AbstractDrive
+from ..core.metrics import AbstractMetric
+from ..core.precision import require_x64
+from ..drives.protocol import AbstractDrive, Eccentricity
+from .errors import ErrorModel
+from .laws import AbstractValueLaw, FixedPhase, Optimised, RelativePhase, UniformPhase
+from .montecarlo import TEStudy, as_key
 
 _TWO_PI = 2.0 * math.pi
 # Keep U inside (0, 1): a law's inverse CDF may be infinite at the ends (Normal, untruncated Rayleigh).
@@ -81,104 +70,76 @@ def _import_scipy_stats():
     return stats
 
 
-# ------------------------------------------------------------------ inverse CDFs (JAX)
-
-
-def _is_random(law: AbstractMagnitude) -> bool:
-    """Whether a magnitude law has any spread (a constant law is not an input)."""
-    if isinstance(law, Fixed):
-        return False
-    if isinstance(law, Uniform):
-        return float(law.high) > float(law.low)
-    if isinstance(law, Normal):
-        return float(law.std) > 0
-    return True
-
-
-def _ppf(law: AbstractMagnitude, u: Array) -> Array:
-    """Inverse CDF of a magnitude law at probabilities `u` (µm); the same maps `law.sample` uses."""
-    if isinstance(law, Fixed):
-        return jnp.broadcast_to(law.value, u.shape)
-    if isinstance(law, Uniform):
-        return law.low + (law.high - law.low) * u
-    if isinstance(law, Normal):
-        return law.mean + law.std * ndtri(u)
-    if isinstance(law, TruncatedNormal):
-        a = ndtr((law.low - law.mean) / law.std)
-        b = ndtr((law.high - law.mean) / law.std)
-        p = jnp.clip(a + u * (b - a), 1e-300, 1.0 - 1e-16)
-        return jnp.clip(law.mean + law.std * ndtri(p), law.low, law.high)
-    if isinstance(law, Rayleigh):
-        p = jnp.ones(()) if law.truncate_at is None else -jnp.expm1(-0.5 * (law.truncate_at / law.scale) ** 2)
-        return law.scale * jnp.sqrt(-2.0 * jnp.log1p(-u * p))
-    ppf = getattr(law, "ppf", None)
-    if callable(ppf):
-        return jnp.asarray(ppf(u), dtype=float)
-    raise ValueError(f"magnitude law {type(law).__name__} has no inverse CDF for Sobol' indices: use one of Fixed, "
-                     "Uniform, Normal, TruncatedNormal, Rayleigh, or give the law a method ppf(u) -> magnitude (µm)")
-
-
 # ------------------------------------------------------------------ the inputs of a model
 
 
 class _Plan(eqx.Module):
-    """How a row of d uniforms becomes one set of errors, and its TE metric (rad)."""
+    """How a row of d uniforms becomes one set of errors, and its metric (rad for angles)."""
 
     drive: AbstractDrive
     model: ErrorModel
-    scale: dict[str, Array]  # magnitude factor per source (tolerance / nominal for a budget problem)
-    columns: tuple[tuple[str, tuple[int, ...], tuple[int, ...]], ...] = eqx.field(static=True)  # (source, magnitude, phase columns)
-    metric: str = eqx.field(static=True)
+    scale: dict[str, Array]  # value factor per source (tolerance / nominal for a budget), about the law's centre
+    metric: AbstractMetric
+    columns: tuple[tuple[str, tuple[int, ...], tuple[int, ...]], ...] = eqx.field(static=True)  # (source, value, phase columns)
 
-    def errors(self, u: Float[Array, " d"]) -> dict[str, Eccentricity]:
-        out: dict[str, Eccentricity] = {}
+    def errors(self, u: Float[Array, " d"]) -> dict:
+        out: dict = {}
         cols = {name: (m, p) for name, m, p in self.columns}
         for name in self.model.order:
-            src = self.model.sources[name]
-            c = self.model.counts[name]
-            mag_cols, ph_cols = cols[name]
-            um = u[jnp.asarray(mag_cols)] if mag_cols else jnp.full((c,), 0.5)
-            mag = self.scale[name] * _ppf(src.magnitude, um)
+            src, spec = self.model.sources[name], self.model.specs[name]
+            law = src.magnitude
+            assert isinstance(law, AbstractValueLaw)
+            val_cols, ph_cols = cols[name]
+            uv = u[jnp.asarray(val_cols)].reshape(spec.shape) if val_cols else jnp.full(spec.shape, 0.5)
+            c = law.centre()
+            value = c + self.scale[name] * (law.ppf(uv) - c)
+            if spec.kind == "deviation":
+                out[name] = value
+                continue
             rule = src.phase
             if isinstance(rule, UniformPhase):
-                phase = _TWO_PI * u[jnp.asarray(ph_cols)]
+                phase = _TWO_PI * u[jnp.asarray(ph_cols)].reshape(spec.shape)
             elif isinstance(rule, RelativePhase):
-                phase = jnp.broadcast_to(out[rule.to].phase, (c,)) + rule.offset
+                phase = jnp.broadcast_to(out[rule.to].phase, spec.shape) + rule.offset
             else:  # FixedPhase (checked in _plan)
-                phase = jnp.broadcast_to(rule.value, (c,))
-            out[name] = Eccentricity(mag, phase)
-        return {n: out[n] for n in self.model.counts}
+                assert isinstance(rule, FixedPhase)
+                phase = jnp.broadcast_to(rule.value, spec.shape)
+            out[name] = Eccentricity(value, phase)
+        return {n: out[n] for n in self.model.specs}
 
     def __call__(self, u: Float[Array, " d"]) -> Float[Array, ""]:
-        return te_metric(self.drive.signal(self.errors(jnp.clip(u, _U_MIN, _U_MAX))), self.metric)
+        return self.metric(self.drive, self.drive.response(self.errors(jnp.clip(u, _U_MIN, _U_MAX))))
 
 
 def _label(name: str, kind: str, i: int, count: int) -> str:
     return f"{name}.{kind}" if count == 1 else f"{name}.{kind}[{i}]"
 
 
-def _plan(drive: AbstractDrive, model: ErrorModel, scale: Mapping[str, float], metric: str):
+def _plan(drive: AbstractDrive, model: ErrorModel, scale: Mapping[str, float], metric: AbstractMetric):
     """The inputs (labels, source, kind) and the `_Plan` that evaluates a row of uniforms."""
     labels, owners, kinds = [], [], []
     columns = []
-    for name in model.counts:
-        src, c = model.sources[name], model.counts[name]
+    for name, spec in model.specs.items():
+        src, c = model.sources[name], spec.count
         rule = src.phase
+        kind = "magnitude" if spec.kind == "eccentricity" else "value"
         if isinstance(rule, Optimised):
             raise ValueError(f"error source {name!r}: its phase is to be chosen by the allocation optimiser; resolve the "
-                             "rule first (gearte._allocation.allocate_rule, then a RelativePhase or FixedPhase)")
-        if not isinstance(rule, (UniformPhase, RelativePhase, FixedPhase)):
+                             "rule first (gearte.allocate_rule, then a RelativePhase or FixedPhase)")
+        if rule is not None and not isinstance(rule, (UniformPhase, RelativePhase, FixedPhase)):
             raise ValueError(f"error source {name!r}: phase law {type(rule).__name__} is not supported for Sobol' indices; "
                              "use UniformPhase (an input), FixedPhase or RelativePhase (rules, not inputs)")
-        if isinstance(src.magnitude, AbstractMagnitude) and _is_random(src.magnitude):
-            _ppf(src.magnitude, jnp.full((1,), 0.5))  # fail early, in Python, for a law without an inverse CDF
-            mag_cols = tuple(range(len(labels), len(labels) + c))
+        if not isinstance(src.magnitude, AbstractValueLaw):
+            raise ValueError(f"error source {name!r}: its law ({type(src.magnitude).__name__}) has no inverse CDF for Sobol' "
+                             "indices; use Fixed, Uniform, Normal, TruncatedNormal or Rayleigh")
+        if src.magnitude.is_random():
+            val_cols = tuple(range(len(labels), len(labels) + c))
             for i in range(c):
-                labels.append(_label(name, "magnitude", i, c))
+                labels.append(_label(name, kind, i, c))
                 owners.append(name)
-                kinds.append("magnitude")
+                kinds.append(kind)
         else:
-            mag_cols = ()
+            val_cols = ()
         if isinstance(rule, UniformPhase):
             ph_cols = tuple(range(len(labels), len(labels) + c))
             for i in range(c):
@@ -187,9 +148,9 @@ def _plan(drive: AbstractDrive, model: ErrorModel, scale: Mapping[str, float], m
                 kinds.append("phase")
         else:
             ph_cols = ()
-        columns.append((name, mag_cols, ph_cols))
-    plan = _Plan(drive=drive, model=model, scale={n: jnp.asarray(float(scale[n])) for n in model.counts}, columns=tuple(columns),
-                 metric=metric)
+        columns.append((name, val_cols, ph_cols))
+    plan = _Plan(drive=drive, model=model, scale={n: jnp.asarray(float(scale[n])) for n in model.specs}, metric=metric,
+                 columns=tuple(columns))
     return tuple(labels), tuple(owners), tuple(kinds), plan
 
 
@@ -267,28 +228,6 @@ class SobolIndices(eqx.Module):
 # ------------------------------------------------------------------ main entry
 
 
-def _check_tolerances(p: BudgetProblem, tolerances) -> dict[str, float]:
-    if tolerances is None:
-        return {n: float(p.nominal[n]) for n in p.names}
-    if not isinstance(tolerances, Mapping):
-        raise ValueError(f"tolerances: a mapping source → tolerance (µm), got {type(tolerances).__name__}")
-    missing = [n for n in p.names if n not in tolerances]
-    extra = [n for n in tolerances if n not in p.names]
-    if missing or extra:
-        raise ValueError(f"tolerances: give one tolerance (µm) per error source {p.names}"
-                         + (f"; missing {missing}" if missing else "") + (f"; unknown {extra}" if extra else ""))
-    out = {}
-    for n in p.names:
-        try:
-            t = float(tolerances[n])
-        except (TypeError, ValueError):
-            raise ValueError(f"tolerances[{n!r}]: expected a number (µm), got {tolerances[n]!r}") from None
-        if not (math.isfinite(t) and t > 0):
-            raise ValueError(f"tolerances[{n!r}]: a tolerance must be finite and > 0 µm, got {tolerances[n]!r}")
-        out[n] = t
-    return out
-
-
 def _numpy_rng(key: PRNGKeyArray) -> np.random.Generator:
     # The Sobol' scrambling is drawn by NumPy: seed it from the JAX key, so one key fixes everything.
     words = np.asarray(jax.random.bits(key, (4,), dtype=jnp.uint32))
@@ -326,11 +265,11 @@ def _evaluate(plan: _Plan, rows: np.ndarray, block: int) -> np.ndarray:
 
 
 def sobol_indices(
-    study: TEStudy | BudgetProblem,
+    study: TEStudy,
     *,
     key: int | PRNGKeyArray,
     n: int = 1024,
-    tolerances: Mapping[str, float] | None = None,
+    scale: Mapping[str, float] | None = None,
     confidence_level: float | None = None,
     n_resamples: int = 999,
     block_size: int = 2048,
@@ -339,15 +278,13 @@ def sobol_indices(
 
     **Arguments:**
 
-    - `study`: a `gearte.TEStudy` (drive, error model, metric), or a tolerance-budget problem
-      (`gearte._budget.budget_problem`) — then the magnitudes are those of its laws scaled
-      from the nominal tolerances to `tolerances`, magnitude = (T_i / T_nominal,i) · F_i⁻¹(U),
-      exactly as the budget scales them, and its metric is used.
+    - `study`: a `gearte.TEStudy` (drive, error model, one metric).
     - `key`: integer seed or `jax.random` key; it fixes the scrambled Sobol' design, so the
       result is reproducible.
     - `n`: base samples, a power of 2 (≥ 16). Y is evaluated n · (2 + d + g) times, with d
       inputs and g sources that have inputs.
-    - `tolerances`: µm per source, for a budget problem only (default: its nominal tolerances).
+    - `scale`: a factor per source applied to its law about the law's centre, value =
+      c + f · (F⁻¹(U) − c), as a tolerance budget scales tolerances (default 1 for every source).
     - `confidence_level`: e.g. 0.95 for bootstrap (BCa) intervals of the per-input indices
       from `scipy.stats`; None (default) for none.
     - `n_resamples`: bootstrap resamples.
@@ -356,18 +293,16 @@ def sobol_indices(
     **Returns:** a `SobolIndices`.
     """
     require_x64()
-    if isinstance(study, BudgetProblem):
-        scale = {k: t / float(study.nominal[k]) for k, t in _check_tolerances(study, tolerances).items()}
-        drive, model, metric = study.drive, study.model, study.metric
-    elif isinstance(study, TEStudy):
-        if tolerances is not None:
-            raise ValueError("tolerances: only for a budget problem, whose laws are defined at nominal tolerances; "
-                             "for a TEStudy, put the tolerances in its magnitude laws")
-        drive, model, metric = study.drive, study.errors, study.metric
-        scale = {k: 1.0 for k in model.counts}
-    else:
-        raise ValueError(f"study: expected a gearte.TEStudy(drive, errors, metric=...) or a budget problem "
-                         f"(gearte._budget.budget_problem), got {type(study).__name__}")
+    if not isinstance(study, TEStudy) or isinstance(study.metric, tuple):
+        raise ValueError(f"study: expected a gearte.TEStudy(drive, errors, metric=...) with one metric, got {study!r:.80}")
+    drive, model, metric = study.drive, study.errors, study.metric
+    factors = {k: 1.0 for k in model.specs}
+    for k, f in (scale or {}).items():
+        if k not in factors:
+            raise ValueError(f"scale: {k!r} is not an error source; use some of {list(factors)}")
+        if not (math.isfinite(float(f)) and float(f) > 0):
+            raise ValueError(f"scale[{k!r}]: a factor > 0, got {f!r}")
+        factors[k] = float(f)
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 16 or (int(n) & (int(n) - 1)):
         raise ValueError(f"n: the number of base samples must be a power of 2 ≥ 16 (a Sobol' sequence's balance needs it), got {n!r}")
     n = int(n)
@@ -380,12 +315,12 @@ def sobol_indices(
     key = as_key(key)
     stats = _import_scipy_stats()
 
-    labels, owners, kinds, plan = _plan(drive, model, scale, metric)
+    labels, owners, kinds, plan = _plan(drive, model, factors, metric)
     d = len(labels)
     if d == 0:
         raise ValueError("the error model has no random input: every magnitude is constant and every phase is fixed "
                          "or set by a rule, so the TE does not vary")
-    groups = [s for s in model.counts if s in owners]
+    groups = [s for s in model.specs if s in owners]
     A, B = _sobol_design(stats, n, d, _numpy_rng(key))
     pages = []
     for j in range(d):
@@ -409,7 +344,7 @@ def sobol_indices(
     ci1 = cit = None
     if confidence_level is not None:
         ci1, cit = _bootstrap(per_input, s1, st, float(confidence_level), int(n_resamples), key)
-    names = list(model.counts)
+    names = list(model.specs)
     first_sum = {s: float(sum(s1[j] for j in range(d) if owners[j] == s)) for s in names}
     closed = {s: float(g1[groups.index(s)]) if s in groups else 0.0 for s in names}
     total = {s: float(gt[groups.index(s)]) if s in groups else 0.0 for s in names}
@@ -417,7 +352,7 @@ def sobol_indices(
     return SobolIndices(inputs=labels, input_source=owners, input_kind=kinds, first_order=s1, total_order=st,
                         first_order_ci=ci1, total_order_ci=cit, source_first_order_sum=first_sum,
                         source_closed_first_order=closed, source_total_order=total, mean=float(np.mean(both)),
-                        variance=float(np.var(both)), n=n, evaluations=int(y.size), metric=metric,
+                        variance=float(np.var(both)), n=n, evaluations=int(y.size), metric=metric.name,
                         confidence_level=None if confidence_level is None else float(confidence_level))
 
 
@@ -458,88 +393,3 @@ def _bootstrap(res, s1, st, level: float, n_resamples: int, key) -> tuple[np.nda
         return np.stack([lo, hi], axis=-1)
 
     return interval(b.first_order, s1), interval(b.total_order, st)
-
-
-# ------------------------------------------------------------------ side by side with the gradient contributions
-
-
-class SensitivityTable(eqx.Module):
-    """Per error source: tolerance (µm), gradient contribution ∂stat/∂T_i · T_i (rad) and its share
-    of the constrained statistic, next to the Sobol' indices of the per-sample TE.
-
-    `statistic`: the budget's smooth constrained statistic at these tolerances (rad), which the
-    contributions add up to (Euler's theorem); `sobol`: the full `SobolIndices`.
-    """
-
-    tolerances: dict[str, float]
-    contribution: dict[str, float]
-    statistic: float
-    sobol: SobolIndices
-
-    @property
-    def sources(self) -> list[str]:
-        return list(self.tolerances)
-
-    def rows(self) -> list[dict]:
-        """One dict per source: tolerance_um, contribution_rad, share, sobol_first_order_sum,
-        sobol_closed_first_order, sobol_total_order."""
-        s = self.sobol
-        return [{"source": n, "tolerance_um": self.tolerances[n], "contribution_rad": self.contribution[n],
-                 "share": self.contribution[n] / self.statistic if self.statistic else float("nan"),
-                 "sobol_first_order_sum": s.source_first_order_sum[n], "sobol_closed_first_order": s.source_closed_first_order[n],
-                 "sobol_total_order": s.source_total_order[n]} for n in self.sources]
-
-    def to_dict(self) -> dict:
-        return {"statistic_rad": self.statistic, "rows": self.rows(), "sobol": self.sobol.to_dict()}
-
-    def format(self, *, unit: str = "arcsec") -> str:
-        """A plain-text table; contributions in `unit` ("arcsec", "arcmin", "urad" or "rad")."""
-        from .units import UNIT_SYMBOLS, angle_from_rad
-
-        sym = UNIT_SYMBOLS.get(unit)
-        if sym is None:
-            raise ValueError(f"unit: one of {sorted(UNIT_SYMBOLS)}, got {unit!r}")
-        head = (f"{'source':22s} {'T (µm)':>8s} {'∂stat/∂T·T':>12s} {'share':>7s} {'ΣS_i':>7s} {'S_clo':>7s} {'S_T':>7s}")
-        lines = [head, "-" * len(head)]
-        for r in self.rows():
-            c = float(angle_from_rad(r["contribution_rad"], unit))
-            lines.append(f"{r['source']:22s} {r['tolerance_um']:8.3g} {c:10.2f}{sym:2s} {r['share']:7.1%} "
-                         f"{r['sobol_first_order_sum']:7.3f} {r['sobol_closed_first_order']:7.3f} {r['sobol_total_order']:7.3f}")
-        lines.append(f"{'sum':22s} {'':>8s} {float(angle_from_rad(self.statistic, unit)):10.2f}{sym:2s} {'':>7s} "
-                     f"{sum(self.sobol.source_first_order_sum.values()):7.3f}")
-        return "\n".join(lines)
-
-
-def sensitivity_table(
-    problem: BudgetProblem,
-    tolerances: Mapping[str, float] | None = None,
-    *,
-    key: int | PRNGKeyArray,
-    n_sobol: int = 1024,
-    n_samples: int = 8192,
-) -> SensitivityTable:
-    """Gradient contributions and Sobol' indices of a budget problem, source by source.
-
-    **Arguments:**
-
-    - `problem`: the budget problem (`gearte._budget.budget_problem`): drive, error laws at
-      the nominal tolerances, constrained statistic.
-    - `tolerances`: µm per source (default: the nominal tolerances).
-    - `key`: integer seed or `jax.random` key (split between the two analyses).
-    - `n_sobol`: base samples of the Sobol' design (a power of 2).
-    - `n_samples`: common random samples for the gradient contributions.
-
-    **Returns:** a `SensitivityTable`. The two measures answer different questions: the
-    contribution is the share of the *constrained statistic* (e.g. the 99.73 % point) that a
-    source owns at these tolerances — what tightening it buys; a Sobol' index is the share of
-    the *variance* of the per-sample TE that its random inputs explain.
-    """
-    if not isinstance(problem, BudgetProblem):
-        raise ValueError(f"problem: expected a budget problem (gearte._budget.budget_problem), got {type(problem).__name__}")
-    tol = _check_tolerances(problem, tolerances)
-    if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 2:
-        raise ValueError(f"n_samples: must be a whole number ≥ 2, got {n_samples!r}")
-    k_grad, k_sobol = jax.random.split(as_key(key))
-    contrib = contributions(problem, tol, key=k_grad, n_samples=int(n_samples))
-    sob = sobol_indices(problem, key=k_sobol, n=n_sobol, tolerances=tol)
-    return SensitivityTable(tolerances=tol, contribution=contrib, statistic=float(sum(contrib.values())), sobol=sob)

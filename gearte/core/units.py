@@ -1,5 +1,8 @@
-"""Units. Inside gearte: lengths of errors in µm, geometry in mm, angles in rad.
-Reports use arcseconds (″) by default, arcminutes (′) or µrad on request."""
+"""Units: the one place for conversion constants.
+
+Inside gearte: error lengths in µm, geometry in mm, angles in rad. Reports use arcseconds
+(″) by default, arcminutes (′) or µrad on request.
+"""
 
 import math
 
@@ -7,9 +10,11 @@ ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi  # 206264.806…″ per rad
 ARCMIN_PER_RAD = 180.0 * 60.0 / math.pi
 URAD_PER_RAD = 1e6
 MM_PER_UM = 1e-3
+TWO_PI = 2.0 * math.pi
 
 _PER_RAD = {"rad": 1.0, "arcsec": ARCSEC_PER_RAD, "arcmin": ARCMIN_PER_RAD, "urad": URAD_PER_RAD}
 UNIT_SYMBOLS = {"rad": "rad", "arcsec": "″", "arcmin": "′", "urad": "µrad"}
+ANGLE_UNITS = tuple(_PER_RAD)
 
 
 def angle_from_rad(value, unit: str = "arcsec"):

@@ -1,14 +1,14 @@
 """Assembly-phase allocation: choose how parts are turned at assembly to cut the TE.
 
-Two situations (seed 000, sections 1 and 3; spec planetary_2kh.md):
+Two situations (Wang et al. 2013, sections 1 and 3):
 
 - **Measured parts** (`allocate_measured`): every magnitude and manufacturing phase is
   known; choose the adjustable phases that minimise the exact peak (or peak-to-peak).
 - **Unmeasured parts** (`allocate_rule`): only the tolerances are known; choose an
-  assembly *rule* — adjustable phases as offsets from a datum phase (the seed's β_r) or
+  assembly *rule* — adjustable phases as offsets from a datum phase (Wang et al.'s β_r) or
   as absolute values — that minimises the worst case over the unknown manufacturing
   phases, the expected TE over them, or the expected TE when the magnitudes are random
-  too. The seed's collinear compensation (λ_i = ±1) is one candidate, not a limit: the
+  too. Wang et al.'s collinear compensation (λ_i = ±1) is one candidate, not a limit: the
   optimiser works on the true objective, where phasors may close a polygon.
 
 Optimisation runs on smooth surrogates with optimistix (BFGS, multi-start under
@@ -27,20 +27,38 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ._distributions import FixedPhase, Optimised, RelativePhase, UniformPhase
-from ._errors import Eccentricity, ErrorModel
-from ._metrics import smooth_peak, te_metric
-from ._montecarlo import as_key
-from ._precision import require_x64
-from ._signal import Components, to_signal
-from .drives._base import AbstractDrive
+from ..core.extrema import smooth_peak
+from ..core.metrics import AbstractMetric, Peak, PeakToPeak
+from ..core.precision import require_x64
+from ..core.signal import Components, to_signal
+from ..core.solution import RESULTS, check
+from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
+from ..studies.errors import ErrorModel
+from ..studies.laws import FixedPhase, RelativePhase, UniformPhase
+from ..studies.montecarlo import as_key, monte_carlo
 
 _TWO_PI = 2.0 * math.pi
 
 
-def _check_solver_results(results) -> int:
-    """Number of starts whose solver finished successfully (the rest are reported, not hidden)."""
-    return int(np.sum(np.asarray(results == optx.RESULTS.successful)))
+def _starts_result(results, best) -> tuple[int, RESULTS]:
+    """How many starts succeeded, and the result code of the solve: that of the best start, or
+    `some_starts_failed` when it succeeded but others did not (reported, not hidden)."""
+    ok = np.asarray(results == optx.RESULTS.successful)
+    best_ok = bool(ok[int(best)])
+    if not best_ok:
+        return int(ok.sum()), RESULTS.promote(jax.tree.map(lambda v: v[int(best)], results))
+    return int(ok.sum()), RESULTS.successful if ok.all() else RESULTS.some_starts_failed
+
+
+def _check_drive(drive) -> None:
+    if not isinstance(drive, AbstractSinusoidalDrive):
+        raise ValueError(f"assembly-phase allocation needs a drive whose TE is a sum of sinusoids with phases "
+                         f"(planetary, harmonic, explicit); {type(drive).__name__} is not one")
+
+
+def _check_metric(metric) -> None:
+    if not isinstance(metric, (Peak, PeakToPeak)):
+        raise ValueError(f"metric: gearte.Peak() or gearte.PeakToPeak(), got {metric!r}")
 
 
 # ------------------------------------------------------------------ measured parts
@@ -50,15 +68,17 @@ class MeasuredAllocation(eqx.Module):
     """Result of `allocate_measured`.
 
     `phases`: the chosen phase (rad) of every adjusted source; `te` and `te_before`: the
-    exact metric (rad) with the chosen and with the given phases; `starts`/`converged`: how
-    many optimiser starts ran and how many reported success; `enumerated`: whether the
-    discrete optimum was verified by enumerating every allowed combination.
+    exact metric (rad) with the chosen and with the given phases; `result`: the solve's
+    `RESULTS` code; `starts`/`converged`: how many optimiser starts ran and how many reported
+    success; `enumerated`: whether the discrete optimum was verified by enumerating every
+    allowed combination.
     """
 
     phases: dict[str, Array]
     te: Float[Array, ""]
     te_before: Float[Array, ""]
-    metric: str = eqx.field(static=True)
+    result: RESULTS
+    metric: AbstractMetric
     starts: int = eqx.field(static=True)
     converged: int = eqx.field(static=True)
     enumerated: bool = eqx.field(static=True)
@@ -74,16 +94,17 @@ def _with_phases(errors: Mapping[str, Eccentricity], names: list[str], counts: l
 
 
 def allocate_measured(
-    drive: AbstractDrive,
+    drive: AbstractSinusoidalDrive,
     errors: Mapping[str, Eccentricity],
     *,
     adjust: Mapping[str, float | None],
     key: int | PRNGKeyArray,
-    metric: str = "peak",
+    metric: AbstractMetric = Peak(),
     starts: int = 16,
     width: float | None = None,
     max_steps: int = 200,
     enumerate_limit: int = 20_000,
+    throw: bool = True,
 ) -> MeasuredAllocation:
     """Choose the phases of the `adjust` sources that minimise the exact TE metric.
 
@@ -94,16 +115,19 @@ def allocate_measured(
       for a gear turned by whole teeth, 2π/n for an n-bolt pattern), or None for any angle.
       Allowed positions are the given (as-delivered) phase turned by whole steps.
     - `key`: seed or key for the random starts.
-    - `metric`: "peak" or "peak_to_peak".
+    - `metric`: `gearte.Peak()` or `gearte.PeakToPeak()`.
     - `starts`: optimiser starts, run together under `vmap`.
     - `width`: smoothing width of the surrogate, rad (default 0.2 % of the starting metric).
     - `enumerate_limit`: with discrete positions, enumerate every combination when there are
       at most this many, which certifies the discrete optimum.
+    - `throw`: raise if the best start did not converge (else check `result`).
+
+    **Returns:** a `MeasuredAllocation`.
     """
     require_x64()
-    if metric not in ("peak", "peak_to_peak"):
-        raise ValueError(f"metric: 'peak' or 'peak_to_peak', got {metric!r}")
-    counts_all = drive.error_sources
+    _check_drive(drive)
+    _check_metric(metric)
+    counts_all = {n: s.count for n, s in drive.error_sources.items()}
     for n, step in adjust.items():
         if n not in counts_all:
             raise ValueError(f"adjust: {n!r} is not an error source of this drive; use one of {sorted(counts_all)}")
@@ -111,21 +135,21 @@ def allocate_measured(
             raise ValueError(f"adjust[{n!r}]: the step between positions must be > 0 rad, or None for any angle")
     if not adjust:
         raise ValueError("adjust: name at least one error source whose phase may be chosen")
-    errors = drive._checked(errors)
+    errors = drive.checked(errors)
     names = list(adjust)
     counts = [counts_all[n] for n in names]
     dim = sum(counts)
     y_given = jnp.concatenate([errors[n].phase.reshape(-1) for n in names])
 
     def exact(y):
-        return te_metric(drive.signal(_with_phases(errors, names, counts, y)), metric)
+        return metric(drive, drive.signal(_with_phases(errors, names, counts, y)))
 
     te_before = exact(y_given)
     w = float(width) if width is not None else 2e-3 * max(float(te_before), 1e-12)
 
     def surrogate(y, args):
         sig = drive.signal(_with_phases(errors, names, counts, y))
-        if metric == "peak":
+        if isinstance(metric, Peak):
             return smooth_peak(sig, width=w) / w
         # Peak-to-peak: smooth max of f plus smooth max of −f.
         pos = smooth_peak(eqx.tree_at(lambda s: s.offset, sig, sig.offset + 1e3 * w), width=w)
@@ -147,8 +171,10 @@ def allocate_measured(
     for n, c in zip(names, counts):
         phases[n] = jnp.mod(y_best[i:i + c], _TWO_PI) if c > 1 else jnp.mod(y_best[i], _TWO_PI)
         i += c
-    return MeasuredAllocation(phases=phases, te=te_best, te_before=te_before, metric=metric, starts=starts,
-                              converged=_check_solver_results(sol.result), enumerated=enumerated)
+    converged, result = _starts_result(sol.result, best)
+    check(result, throw=throw and result != RESULTS.some_starts_failed, what="allocate_measured")
+    return MeasuredAllocation(phases=phases, te=te_best, te_before=te_before, result=result, metric=metric, starts=starts,
+                              converged=converged, enumerated=enumerated)
 
 
 def _discrete(exact, y_cont, y_given, steps, limit):
@@ -197,7 +223,7 @@ class RuleProblem(eqx.Module):
     ("relative") or ``offset`` ("absolute"); every other phase follows its own rule.
     """
 
-    drive: AbstractDrive
+    drive: AbstractSinusoidalDrive
     model: ErrorModel
     tolerances: dict[str, Array]
     adjust: dict[str, str] = eqx.field(static=True)
@@ -260,7 +286,7 @@ def _rule_order(p: RuleProblem) -> list[str]:
     return order
 
 
-def rule_problem(drive: AbstractDrive, model: ErrorModel, *, adjust: Mapping[str, str], datum: str,
+def rule_problem(drive: AbstractSinusoidalDrive, model: ErrorModel, *, adjust: Mapping[str, str], datum: str,
                  tolerances: Mapping[str, float]) -> RuleProblem:
     """Set up an assembly-rule problem.
 
@@ -272,6 +298,7 @@ def rule_problem(drive: AbstractDrive, model: ErrorModel, *, adjust: Mapping[str
     - `datum`: the source whose (unknown) phase is the assembly datum, e.g. "ring_manufacturing" (β_r).
     - `tolerances`: µm per source: the magnitudes for the worst-case and expected objectives.
     """
+    _check_drive(drive)
     counts = model.counts
     for n, mode in adjust.items():
         if n not in counts:
@@ -322,20 +349,20 @@ def _group_parts(p: RuleProblem, offsets: Array, group: np.ndarray) -> list:
     return parts
 
 
-def worst_case(p: RuleProblem, offsets: Array, *, metric: str = "peak") -> Float[Array, ""]:
+def worst_case(p: RuleProblem, offsets: Array, *, metric: AbstractMetric = Peak()) -> Float[Array, ""]:
     """Worst case of the exact peak over every unknown phase, magnitudes at the tolerances (rad).
 
     Each unknown phase turns its own group of components; when every group is one frequency
     (or a constant) each group can reach ± its amplitude at any instant, so the worst case is
-    exactly the fixed part's peak plus the sum of the groups' amplitudes (the seed's
+    exactly the fixed part's peak plus the sum of the groups' amplitudes (Wang et al.'s
     sum-of-amplitudes, with each group's amplitude computed by phasor sum, exact).
     """
-    if metric != "peak":
-        raise ValueError("worst_case: only the peak metric is supported")
+    if not isinstance(metric, Peak):
+        raise ValueError("worst_case: only the peak metric (gearte.Peak()) is supported")
     group, single = _groups(p)
     if not single:
         raise ValueError("worst_case: an unknown phase drives components of several frequencies; use the expected objective")
-    return sum(te_metric(sig, "peak") for _, sig in _group_parts(p, jnp.asarray(offsets, dtype=float), group))
+    return sum(metric(p.drive, sig) for _, sig in _group_parts(p, jnp.asarray(offsets, dtype=float), group))
 
 
 def _smooth_worst_case(p: RuleProblem, offsets: Array, group: np.ndarray, width: float) -> Array:
@@ -368,7 +395,7 @@ class _RuleSample(eqx.Module):
     problem: RuleProblem
     offsets: Array
     robust: bool = eqx.field(static=True)
-    metric: str = eqx.field(static=True)
+    metric: AbstractMetric
 
     def __call__(self, key):
         p = self.problem
@@ -379,15 +406,13 @@ class _RuleSample(eqx.Module):
                     for j, n in enumerate(p.model.counts)}
         else:
             mags = p.tolerances
-        return te_metric(p.drive.signal(p.errors(mags, beta, self.offsets)), self.metric)
+        return self.metric(p.drive, p.drive.signal(p.errors(mags, beta, self.offsets)))
 
 
 def expected(p: RuleProblem, offsets: Array, *, key: int | PRNGKeyArray, n_samples: int = 50_000, robust: bool = False,
-             metric: str = "peak") -> Float[Array, ""]:
+             metric: AbstractMetric = Peak()) -> Float[Array, ""]:
     """Mean exact metric (rad) over uniform unknown phases, magnitudes at the tolerances
     (or drawn by their laws if `robust`), by Monte Carlo with `n_samples` samples."""
-    from ._montecarlo import monte_carlo
-
     fn = _RuleSample(p, jnp.asarray(offsets, dtype=float), robust, metric)
     return jnp.mean(jnp.asarray(monte_carlo(fn, key=key, n_samples=n_samples, block_size=1024, progress=False).values))
 
@@ -397,20 +422,22 @@ class RuleAllocation(eqx.Module):
 
     `offsets`: source → offset (rad) from the datum ("relative") or absolute phase.
     `worst_case`, `expected`, `robust`: the three objectives evaluated exactly (the last two
-    by Monte Carlo with `n_check` fresh samples); `objective`: which one was minimised.
+    by Monte Carlo with `n_check` fresh samples); `objective`: which one was minimised;
+    `result`: the solve's `RESULTS` code; `starts`/`converged`: starts run and succeeded.
     """
 
     offsets: dict[str, Array]
     worst_case: Float[Array, ""]
     expected: Float[Array, ""]
     robust: Float[Array, ""]
+    result: RESULTS
     objective: str = eqx.field(static=True)
     starts: int = eqx.field(static=True)
     converged: int = eqx.field(static=True)
 
 
 def evaluate_rule(p: RuleProblem, offsets: Mapping[str, float] | Array, *, key: int | PRNGKeyArray, n_check: int = 50_000) -> dict[str, Array]:
-    """Exact worst case, expected and robust TE (rad) of a rule (e.g. the seed's Table 3)."""
+    """Exact worst case, expected and robust TE (rad) of a rule (e.g. Wang et al.'s Table 3 rule)."""
     off = jnp.asarray([offsets[n] for n in p.adjust], dtype=float) if isinstance(offsets, Mapping) else jnp.asarray(offsets, dtype=float)
     k1, k2 = jax.random.split(as_key(key))
     return {"worst_case": worst_case(p, off), "expected": expected(p, off, key=k1, n_samples=n_check),
@@ -427,6 +454,7 @@ def allocate_rule(
     n_check: int = 50_000,
     width: float | None = None,
     max_steps: int = 300,
+    throw: bool = True,
 ) -> RuleAllocation:
     """Find the assembly rule that minimises `objective` over the unknown phases.
 
@@ -441,6 +469,9 @@ def allocate_rule(
     - `n_samples`: common random samples in the expected/robust surrogates.
     - `n_check`: fresh Monte Carlo samples for the exact expected/robust figures.
     - `width`: surrogate smoothing width, rad (default 0.2 % of the worst case at zero offsets).
+    - `throw`: raise if the best start did not converge (else check `result`).
+
+    **Returns:** a `RuleAllocation`.
     """
     require_x64()
     if objective not in ("worst_case", "expected", "robust"):
@@ -467,8 +498,12 @@ def allocate_rule(
         scores = jnp.stack([worst_case(p, y) for y in sol.value])
     else:
         scores = jax.vmap(lambda y: surrogate(y, None))(sol.value)
-    y_best = jnp.mod(sol.value[jnp.argmin(scores)], _TWO_PI)
+    best = jnp.argmin(scores)
+    y_best = jnp.mod(sol.value[best], _TWO_PI)
     figures = evaluate_rule(p, y_best, key=k_check, n_check=n_check)
+    converged, result = _starts_result(sol.result, best)
+    # The surrogate is smooth but flat along valleys: a start that stops there is still scored exactly.
+    check(result, throw=throw and result != RESULTS.some_starts_failed, what="allocate_rule")
     return RuleAllocation(offsets={n: y_best[i] for i, n in enumerate(p.adjust)}, worst_case=figures["worst_case"],
-                          expected=figures["expected"], robust=figures["robust"], objective=objective, starts=starts,
-                          converged=_check_solver_results(sol.result))
+                          expected=figures["expected"], robust=figures["robust"], result=result, objective=objective,
+                          starts=starts, converged=converged)

@@ -32,8 +32,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._metrics import _basis, _candidates, _derivatives, _grid_size, _grid_values, extrema
-from ._signal import TESignal, evaluate
+from .extrema import _basis, _candidates, _derivatives, grid_size, _grid_values, extrema
+from .signal import TESignal, evaluate
 
 _TWO_PI = 2.0 * math.pi
 
@@ -83,7 +83,7 @@ def _one_side(signal: TESignal, slow: TESignal, bc: Array, bs: Array, k_fast: in
               candidates: int, newton_steps: int) -> tuple[Array, Array, Array]:
     """τ and value of the maximum (sign = +1) or minimum (sign = −1) of F, and the slow part's extreme value."""
     if slow.orders:
-        m = _grid_size(slow.orders, 16)
+        m = grid_size(slow.orders, 16)
         block = 8
         h = _TWO_PI / m
         cos_b, sin_b = _basis(slow.orders, m, wrap=True)

@@ -9,8 +9,19 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import shlex
 import sys
+
+from .. import __version__
+from ..core.precision import enable_x64
+from ..core.schema import ConfigError
+from ..standards.iso1328 import iso1328_tolerances
+from .compare import compare_runs
+from .config import load_study
+from .io import sigterm_as_interrupt
+from .run import run_study
 
 
 def _positive_int(text: str) -> int:
@@ -35,6 +46,7 @@ def _seed(text: str) -> int:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="gearte", description="Transmission error of gear drives from their manufacturing and assembly errors.")
+    p.add_argument("--version", action="version", version=f"gearte {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run a study file and write its results folder")
     r.add_argument("config", help="study file (TOML)")
@@ -60,17 +72,13 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the `gearte` command line; returns the exit status (2 for bad input, 130 when interrupted)."""
     args = _parser().parse_args(argv)
-    from ._config import ConfigError, load_study
-    from ._io import sigterm_as_interrupt
-
+    # gearte's geometry needs float64; the command line turns it on before any array exists.
+    enable_x64()
     try:
         with sigterm_as_interrupt():
             if args.command == "grade":
-                import json
-
-                from ._iso1328 import iso1328_tolerances
-
                 tol = iso1328_tolerances(standard=args.standard, module=args.module, diameter=args.diameter,
                                          face_width=args.face_width, grade=args.grade, teeth=args.teeth)
                 out = {"standard": args.standard, "grade": args.grade, "module_mm": args.module, "diameter_mm": args.diameter,
@@ -78,36 +86,24 @@ def main(argv: list[str] | None = None) -> int:
                 out.update({k: tol.get(k) for k in ("f_pt", "F_p", "F_alpha", "F_beta", "F_r")})
                 print(json.dumps(out, ensure_ascii=False))
                 return 0
-            if args.command in ("check", "run"):
-                from ._cycloid_run import DRIVE_TYPE, drive_type
-
-                if drive_type(args.config) == DRIVE_TYPE:  # the cycloid-pin reducer has its own study file and runner
-                    from ._cycloid_run import main_check, main_run
-
-                    return main_check(args.config) if args.command == "check" else main_run(args, argv)
             if args.command == "check":
                 study = load_study(args.config)
-                print(f"{args.config}: OK ({study.name}: {type(study.drive).__name__}, {len(study.errors.counts)} error sources, "
-                      f"{study.samples:,} samples, seed {study.seed})")
+                print(f"{args.config}: OK ({study.name}: {type(study.drive).__name__}, {len(study.errors.specs)} error sources, "
+                      f"metric {study.metric.name}, {study.samples:,} samples, seed {study.seed}"
+                      + (f"; {', '.join(f'[{k}]' for k in study.kinds)}" if study.kinds else "") + ")")
                 return 0
             if args.command == "compare":
-                from ._run import compare_runs
-
                 compare_runs(args.runs, args.out)
                 print(f"comparison written to {args.out}/report.md")
                 return 0
             study = load_study(args.config, samples=args.samples, seed=args.seed)
             if args.chunk_size is not None:
-                import dataclasses
-
                 study = dataclasses.replace(study, chunk_size=args.chunk_size)
-            from ._run import run_study
-
             command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
             summary = run_study(study, args.out, progress=args.progress, command=command)
             te = summary["te"]
-            sym = {"arcsec": "″", "arcmin": "′", "urad": " µrad"}[te["unit"]]
-            print(f"{study.name}: {te['metric']} TE over {te['n']:,} samples: mean {te['mean']:.2f}{sym}, std {te['std']:.2f}{sym}, "
+            sym = {"arcsec": "″", "arcmin": "′", "urad": " µrad", "pairs": " pairs"}[te["unit"]]
+            print(f"{study.name}: {te['metric']} over {te['n']:,} samples: mean {te['mean']:.2f}{sym}, std {te['std']:.2f}{sym}, "
                   f"min {te['min']:.2f}{sym}, max {te['max']:.2f}{sym}, P99.73 {te['percentiles']['99.73']:.2f}{sym}")
             print(f"report: {args.out}/report.md")
             return 0

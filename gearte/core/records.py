@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
-from ._signal import TESignal, evaluate
+from .signal import TESignal, evaluate
 
 _TWO_PI = 2.0 * math.pi
 WINDOWS = ("hann", "rectangular")

@@ -1,4 +1,4 @@
-"""TE metrics: exact extrema over the hyper-period, peak, peak-to-peak, RMS, spectrum.
+"""Exact extrema of a TE signal over its hyper-period, and the peak, peak-to-peak, RMS and spectrum functions.
 
 Exact extrema (≤ 1e-6 relative, in practice ~1e-12): the signal is sampled on a
 grid of ``oversample`` points per period of its highest order; the best local
@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._signal import TESignal, evaluate
+from .signal import TESignal, evaluate
 
 _TWO_PI = 2.0 * math.pi
 
@@ -42,7 +42,7 @@ class Extrema(eqx.Module):
     theta_min: Float[Array, "*batch"]
 
 
-def _grid_size(orders: tuple[int, ...], oversample: int) -> int:
+def grid_size(orders: tuple[int, ...], oversample: int) -> int:
     # A whole number of blocks of half a period of the highest order (see `_argmax_tau`).
     block = max(1, oversample // 2)
     m = max(64, oversample * max(orders))
@@ -148,7 +148,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     h²/8 · max|f''| ≤ h²/8 · Σ k²|c_k|. One round settles almost every signal; near-ties
     (e.g. a slow modulation of a fast pattern) take more.
     """
-    m = _grid_size(signal.orders, oversample)
+    m = grid_size(signal.orders, oversample)
     block = max(1, oversample // 2)
     h = _TWO_PI / m
     cos_b, sin_b = _basis(signal.orders, m, wrap=True)
@@ -310,20 +310,8 @@ def smooth_peak(signal: TESignal, *, width: float, oversample: int = 16) -> Floa
         raise ValueError(f"smooth_peak: width must be > 0 rad, got {width}")
     if not signal.orders:
         return width * jnp.logaddexp(signal.offset / width, -signal.offset / width)
-    m = _grid_size(signal.orders, oversample)
+    m = grid_size(signal.orders, oversample)
     cos_b, sin_b = _basis(signal.orders, m)
     f = _grid_values(signal, cos_b, sin_b)
     both = jnp.concatenate([f, -f], axis=-1) / width
     return width * jax.nn.logsumexp(both, axis=-1)
-
-
-METRICS = {"peak": peak, "peak_to_peak": peak_to_peak, "rms": lambda s, **kw: rms(s)}
-
-
-def te_metric(signal: TESignal, metric: str, **kwargs) -> Float[Array, "*batch"]:
-    """Dispatch a metric by name: ``"peak"``, ``"peak_to_peak"`` or ``"rms"`` (rad)."""
-    try:
-        fn = METRICS[metric]
-    except KeyError:
-        raise ValueError(f"unknown TE metric {metric!r}; use one of {sorted(METRICS)}") from None
-    return fn(signal, **kwargs)

@@ -1,0 +1,12 @@
+"""The study kinds, in the order they run: a new kind is one class and one line here."""
+
+from __future__ import annotations
+
+from .allocation_kind import Allocation
+from .budget_kind import Budget
+from .kind_base import AbstractStudyKind
+
+STUDY_KINDS: tuple[AbstractStudyKind, ...] = (
+    Allocation(),
+    Budget(),
+)

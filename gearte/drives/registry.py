@@ -1,0 +1,15 @@
+"""Drives by their study-file name (``[drive] type``): a new drive adds one line here."""
+
+from __future__ import annotations
+
+from .explicit import ExplicitDrive
+from .planetary_2kh import Planetary2KH
+from .protocol import AbstractDrive
+
+DRIVES: dict[str, type[AbstractDrive]] = {
+    cls.type_name: cls
+    for cls in (
+        Planetary2KH,
+        ExplicitDrive,
+    )
+}

@@ -1,0 +1,530 @@
+"""Tolerance budgets: the cheapest tolerances whose metrics meet their specifications, for any drive.
+
+Decision variables: one tolerance T_i per budgeted error source (µm, or rad for angular
+sources); objective: Σ cost_i(T_i); constraints on statistics of metrics of the drive's
+response — the yield P(metric ≤ spec) ≥ target (equivalently the target-quantile ≤ spec;
+for a metric where more is better, such as loaded pairs, P(metric ≥ spec) ≥ target) or
+mean + kσ ≤ spec.
+
+How it is solved:
+
+- **Common random numbers.** Each sample's value of a budgeted source is written
+  ``c + T_i · u_i``, with c the centre its law is toleranced about (0 for a magnitude) and
+  u_i = (draw − c)/T_nominal a standard draw at the nominal tolerance; phases and the other
+  sources are drawn once. The same draws serve every iteration, so each statistic is a
+  deterministic, differentiable function of the tolerances.
+- **Smooth statistics.** The target-quantile is the root q of mean σ((q − x_k)/w) = target, a
+  kernel-smoothed quantile of stated width w relative to the mean; each sample's metric is
+  the metric's `smooth` value (exact where the metric is already Lipschitz, such as a peak).
+- **The constraints are always tight.** Along a direction e^y the tolerances are scaled by
+  the largest s that meets every constraint. When the drive is linear and every metric is
+  positively homogeneous of degree 1 (a peak of a sinusoidal drive, sources toleranced about
+  0) s = spec / statistic(e^y) exactly; otherwise s is found by bisection in log s, and its
+  gradient by the implicit-function theorem (ds/dy = −∂g/∂y / ∂g/∂s). BFGS (optimistix)
+  minimises the cost over y. A source's cost is flat beyond its maximum T_max (default 10 ×
+  nominal): sources that barely matter are held there.
+- **Checked, not assumed.** The found direction is scaled on a fresh Monte Carlo sample so
+  that every exact yield clears its target by four binomial standard errors, then verified
+  on another fresh seed. The baseline — the cheapest uniform scaling of the nominal
+  tolerances — gets the same treatment.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+from typing import Any, Mapping, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from ..core.metrics import AbstractMetric, Peak
+from ..core.precision import require_x64
+from ..core.solution import RESULTS, check
+from ..drives.protocol import AbstractDrive, Eccentricity
+from ..studies.errors import ErrorModel
+from ..studies.laws import AbstractValueLaw
+from ..studies.montecarlo import as_key, sample_keys
+from .costs import AbstractCostModel
+
+
+class AbstractStatistic(eqx.Module):
+    """The statistic a budget constrains (an object, as optimistix passes a norm)."""
+
+    @abc.abstractmethod
+    def describe(self) -> str:
+        """One line for reports."""
+
+
+class Yield(AbstractStatistic):
+    """P(metric meets its spec) ≥ `target`: the target-quantile of the metric against the spec."""
+
+    target: float = eqx.field(static=True)
+
+    def __init__(self, target: float = 0.9973):
+        t = float(target)
+        if not 0.5 <= t < 1:
+            raise ValueError(f"Yield.target: a yield in [0.5, 1), got {target!r}")
+        self.target = t
+
+    def describe(self) -> str:
+        return f"yield ≥ {self.target:g}"
+
+
+class MeanKSigma(AbstractStatistic):
+    """mean + k·σ of the metric against the spec (mean − kσ for a metric where more is better)."""
+
+    k: float = eqx.field(static=True)
+
+    def __init__(self, k: float = 3.0):
+        kk = float(k)
+        if not (math.isfinite(kk) and kk >= 0):
+            raise ValueError(f"MeanKSigma.k: k ≥ 0, got {k!r}")
+        self.k = kk
+
+    def describe(self) -> str:
+        return f"mean + {self.k:g}σ"
+
+
+class Constraint(eqx.Module):
+    """One constraint of a budget: `statistic` of `metric` against `spec` (rad for angles, pairs for counts)."""
+
+    metric: AbstractMetric
+    spec: Float[Array, ""]
+    statistic: AbstractStatistic
+
+    def __init__(self, metric: AbstractMetric, spec: float, statistic: AbstractStatistic = Yield()):
+        if not isinstance(metric, AbstractMetric):
+            raise ValueError(f"Constraint.metric: a metric object such as gearte.Peak(), got {metric!r}")
+        if not isinstance(statistic, AbstractStatistic):
+            raise ValueError(f"Constraint.statistic: gearte.Yield(target) or gearte.MeanKSigma(k), got {statistic!r}")
+        s = float(spec)
+        if not (math.isfinite(s) and s > 0):
+            raise ValueError(f"Constraint.spec: the specification of {metric.name} must be > 0, got {spec!r}")
+        self.metric, self.spec, self.statistic = metric, jnp.asarray(s), statistic
+
+
+class BudgetProblem(eqx.Module):
+    """A tolerance-budget problem (build with `budget_problem`)."""
+
+    drive: AbstractDrive
+    model: ErrorModel
+    costs: dict[str, AbstractCostModel]
+    nominal: dict[str, Array]
+    maximum: dict[str, Array]
+    minimum: dict[str, Array]
+    constraints: tuple[Constraint, ...]
+    width: Float[Array, ""]  # relative to the mean of each metric
+
+    @property
+    def names(self) -> list[str]:
+        """The budgeted sources."""
+        return list(self.costs)
+
+    @property
+    def homogeneous(self) -> bool:
+        """Whether every statistic is positively homogeneous of degree 1 in the tolerances."""
+        return (self.drive.linear and all(c.metric.homogeneous and not c.metric.higher_is_better for c in self.constraints)
+                and all(_centre(self.model, n) is None for n in self.names) and set(self.names) == set(self.model.specs))
+
+
+def _centre(model: ErrorModel, name: str):
+    """The centre a deviation source is toleranced about, or None for 0 (magnitudes)."""
+    if model.specs[name].kind == "eccentricity":
+        return None
+    law = model.sources[name].magnitude
+    if isinstance(law, AbstractValueLaw):
+        c = law.centre()
+        return None if float(c) == 0.0 else c
+    return None
+
+
+def budget_problem(
+    drive: AbstractDrive,
+    model: ErrorModel,
+    *,
+    costs: Mapping[str, AbstractCostModel],
+    nominal: Mapping[str, float],
+    spec: float | None = None,
+    statistic: AbstractStatistic = Yield(),
+    metric: AbstractMetric = Peak(),
+    constraints: Sequence[Constraint] | None = None,
+    maximum: Mapping[str, float] | None = None,
+    minimum: Mapping[str, float] | None = None,
+    width: float | None = None,
+) -> BudgetProblem:
+    """Set up a budget problem.
+
+    **Arguments:**
+
+    - `drive`, `model`: the drive and how its errors are drawn at the nominal tolerances
+      (phases: random or an assembly rule).
+    - `costs`: a cost model per budgeted error source (sources not named keep their laws).
+    - `nominal`: nominal tolerance per budgeted source (µm, or rad; the laws in `model` are for these).
+    - `spec`, `statistic`, `metric`: one constraint, ``statistic(metric) ≤ spec`` (spec in rad
+      for angles); or give `constraints`, a list of `Constraint`s, instead.
+    - `maximum`: largest tolerance allowed per source (default 10 × nominal).
+    - `minimum`: the finest tolerance the shop can hold per source (default 0): a spec that
+      even these miss is infeasible, and `optimise_budget` says so.
+    - `width`: width of the smoothed quantile relative to the mean of each metric (default
+      0.005). Relative, so that a homogeneous statistic stays exactly homogeneous.
+    """
+    names = list(costs)
+    unknown = [n for n in names if n not in model.specs]
+    if unknown:
+        raise ValueError(f"costs: {unknown} are not error sources of this drive; use some of {list(model.specs)}")
+    if not names:
+        raise ValueError("costs: give a cost model for at least one error source")
+    for what, m in (("nominal", nominal),):
+        missing = [n for n in names if n not in m]
+        extra = [n for n in m if n not in names]
+        if missing or extra:
+            raise ValueError(f"{what}: give one entry per budgeted source {names}" + (f"; missing {missing}" if missing else "")
+                             + (f"; unknown {extra}" if extra else ""))
+    for n in names:
+        if not isinstance(costs[n], AbstractCostModel):
+            raise ValueError(f"costs[{n!r}]: expected a cost model such as gearte.Reciprocal(a, b)")
+        t = float(nominal[n])
+        if not (math.isfinite(t) and t > 0):
+            raise ValueError(f"nominal[{n!r}]: a tolerance must be > 0, got {nominal[n]!r}")
+    maximum = dict(maximum or {})
+    for n in names:
+        tmax = float(maximum.get(n, 10 * float(nominal[n])))
+        if not (math.isfinite(tmax) and tmax > 0):
+            raise ValueError(f"maximum[{n!r}]: must be > 0, got {tmax!r}")
+        maximum[n] = tmax
+    minimum = dict(minimum or {})
+    for n in names:
+        tmin = float(minimum.get(n, 0.0))
+        if not (math.isfinite(tmin) and 0 <= tmin < maximum[n]):
+            raise ValueError(f"minimum[{n!r}]: must be ≥ 0 and below the maximum {maximum[n]:g}, got {tmin!r}")
+        minimum[n] = tmin
+    if constraints is None:
+        if spec is None:
+            raise ValueError("spec: give the specification (rad for an angle), or a list of `constraints`")
+        constraints = [Constraint(metric, spec, statistic)]
+    elif spec is not None:
+        raise ValueError("give either `spec` (one constraint) or `constraints`, not both")
+    constraints = tuple(constraints)
+    if not constraints:
+        raise ValueError("constraints: give at least one")
+    offered = drive.metrics
+    for c in constraints:
+        if not isinstance(c, Constraint):
+            raise ValueError(f"constraints: expected gearte.Constraint objects, got {c!r}")
+        if c.metric.name not in offered:
+            raise ValueError(f"constraint metric {c.metric.name!r}: {type(drive).__name__} offers {list(offered)}")
+    w = float(width) if width is not None else 5e-3
+    if not (math.isfinite(w) and 0 < w < 1):
+        raise ValueError(f"width: a relative width in (0, 1), got {width!r}")
+    return BudgetProblem(drive=drive, model=model, costs={n: costs[n] for n in names},
+                         nominal={n: jnp.asarray(float(nominal[n])) for n in names},
+                         maximum={n: jnp.asarray(maximum[n]) for n in names}, minimum={n: jnp.asarray(minimum[n]) for n in names},
+                         constraints=constraints, width=jnp.asarray(w))
+
+
+class _Draws(eqx.Module):
+    """Common random numbers: the errors at the nominal tolerances, with the budgeted values as standard draws u."""
+
+    u: dict[str, Array]
+    errors: dict[str, Any]
+
+
+def _draws(p: BudgetProblem, key: PRNGKeyArray, n: int) -> _Draws:
+    errs = jax.vmap(p.model.sample)(sample_keys(key, 0, n))
+    u = {}
+    for k in p.names:
+        e = errs[k]
+        c = _centre(p.model, k)
+        value = e.magnitude if isinstance(e, Eccentricity) else e
+        u[k] = (value if c is None else value - c) / p.nominal[k]
+    return _Draws(u=u, errors=errs)
+
+
+def _errors_at(p: BudgetProblem, tolerances: Mapping[str, Array], u: Mapping[str, Array], errors: Mapping[str, Any]) -> dict:
+    out = dict(errors)
+    for k in p.names:
+        c = _centre(p.model, k)
+        value = tolerances[k] * u[k] if c is None else c + tolerances[k] * u[k]
+        e = errors[k]
+        out[k] = Eccentricity(value, e.phase) if isinstance(e, Eccentricity) else value
+    return out
+
+
+def metric_samples(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws, *, exact: bool = False) -> Float[Array, "c n"]:
+    """Each constraint's metric (rad for angles) for every drawn sample at these tolerances: smooth, or `exact`."""
+    def one(u, errs):
+        r = p.drive.response(_errors_at(p, tolerances, u, errs))
+        return jnp.stack([c.metric(p.drive, r) if exact else c.metric.smooth(p.drive, r) for c in p.constraints])
+
+    return jax.vmap(one)(draws.u, draws.errors).T
+
+
+def te_samples(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws) -> Float[Array, " n"]:
+    """The first constraint's exact metric for every drawn sample (rad)."""
+    return metric_samples(p, tolerances, draws, exact=True)[0]
+
+
+def smooth_quantile(x: Float[Array, " n"], level: float, width, *, iterations: int = 64) -> Float[Array, ""]:
+    """Kernel-smoothed `level`-quantile of samples `x`: the q with mean σ((q − x_k)/width) = level.
+
+    Differentiable in `x` and in `width` (which may depend on `x`) by the implicit-function
+    theorem: dq = Σ_k σ'_k [dx_k + (q − x_k) dw / w] / Σ_k σ'_k. As width → 0 it tends to the
+    empirical quantile.
+    """
+    xs = jax.lax.stop_gradient(x)
+    width = jnp.asarray(width, dtype=float)
+    ws = jax.lax.stop_gradient(width)
+
+    def residual(q):
+        return jnp.mean(jax.nn.sigmoid((q - xs) / ws)) - level
+
+    def body(_, lh):  # bisection: monotone and safe for any data
+        lo, hi = lh
+        mid = 0.5 * (lo + hi)
+        up = residual(mid) > 0
+        return jnp.where(up, lo, mid), jnp.where(up, mid, hi)
+
+    lo, hi = jax.lax.fori_loop(0, iterations, body, (jnp.min(xs) - 40 * ws, jnp.max(xs) + 40 * ws))
+    q = 0.5 * (lo + hi)
+    s = jax.nn.sigmoid((q - xs) / ws)
+    wk = s * (1 - s)
+    wk = wk / jnp.sum(wk)
+    return q + jnp.sum(wk * (x - xs)) + jnp.sum(wk * (q - xs)) / ws * (width - ws)
+
+
+def statistic(p: BudgetProblem, x: Float[Array, " n"], c: Constraint | None = None) -> Float[Array, ""]:
+    """The constrained statistic of metric samples `x`, smooth (rad for angles)."""
+    c = p.constraints[0] if c is None else c
+    lower = c.metric.higher_is_better
+    if isinstance(c.statistic, Yield):
+        level = (1.0 - c.statistic.target) if lower else c.statistic.target
+        # Width ∝ the mean keeps the statistic positively homogeneous of degree 1, exactly.
+        return smooth_quantile(x, level, p.width * jnp.mean(jnp.abs(x)) if lower else p.width * jnp.mean(x))
+    assert isinstance(c.statistic, MeanKSigma)
+    return jnp.mean(x) - c.statistic.k * jnp.std(x) if lower else jnp.mean(x) + c.statistic.k * jnp.std(x)
+
+
+def _violation(p: BudgetProblem, x: Array) -> Array:
+    """Per constraint, statistic − spec (≤ 0 where met), signed so that it grows with the tolerances."""
+    out = []
+    for j, c in enumerate(p.constraints):
+        s = statistic(p, x[j], c)
+        out.append(c.spec - s if c.metric.higher_is_better else s - c.spec)
+    return jnp.stack(out)
+
+
+_BRACKET = (1e-3, 1e3)
+
+
+def _scale(p: BudgetProblem, d: Mapping[str, Array], draws: _Draws) -> Array:
+    """The largest s (within the bracket) with every constraint met at s·d; differentiable in d."""
+    if p.homogeneous:
+        # Positive homogeneity: the statistic of s·d is s times that of d.
+        x = metric_samples(p, d, draws)
+        return jnp.min(jnp.stack([c.spec / statistic(p, x[j], c) for j, c in enumerate(p.constraints)]))
+
+    def g(log_s, dd):
+        s = jnp.exp(log_s)
+        return jnp.max(_violation(p, metric_samples(p, {n: s * dd[n] for n in p.names}, draws)))
+
+    ds = jax.lax.stop_gradient(d)
+    lo, hi = math.log(_BRACKET[0]), math.log(_BRACKET[1])
+
+    def body(_, lh):
+        a, b = lh
+        mid = 0.5 * (a + b)
+        ok = g(mid, ds) <= 0
+        return jnp.where(ok, mid, a), jnp.where(ok, b, mid)
+
+    a, b = jax.lax.fori_loop(0, 48, body, (jnp.asarray(lo), jnp.asarray(hi)))
+    log_s = jax.lax.stop_gradient(0.5 * (a + b))
+    # Implicit-function theorem at the root: d(log s) = −∂g/∂d · dd / ∂g/∂(log s).
+    g_s = jax.lax.stop_gradient(jax.grad(g)(log_s, ds))
+    g_live = g(log_s, d) - jax.lax.stop_gradient(g(log_s, ds))
+    safe = jnp.where(jnp.abs(g_s) > 0, g_s, 1.0)
+    return jnp.exp(log_s - jnp.where(jnp.abs(g_s) > 0, g_live / safe, 0.0))
+
+
+def _tight(p: BudgetProblem, y: Array, draws: _Draws) -> dict[str, Array]:
+    """Tolerances in the direction e^y, scaled so that the binding constraint holds exactly."""
+    d = {n: jnp.exp(y[i]) for i, n in enumerate(p.names)}
+    s = _scale(p, d, draws)
+    return {n: s * d[n] for n in p.names}
+
+
+def _capped_cost(p: BudgetProblem, tolerances: Mapping[str, Array]) -> Float[Array, ""]:
+    # Beyond its maximum a source costs no less: there is no reason to loosen it further.
+    return sum(p.costs[n](jnp.minimum(tolerances[n], p.maximum[n]), throw=False) for n in p.names)  # pyright: ignore[reportReturnType]
+
+
+def total_cost(p: BudgetProblem, tolerances: Mapping[str, Array], *, throw: bool = True) -> Float[Array, ""]:
+    """Σ cost_i(T_i)."""
+    return sum(p.costs[n](tolerances[n], throw=throw) for n in p.names)  # pyright: ignore[reportReturnType]
+
+
+class BudgetResult(eqx.Module):
+    """A checked budget.
+
+    - `tolerances`: per budgeted source (µm, or rad); `cost`: Σ cost_i.
+    - `verified_yield`: fraction of `verified_samples` fresh samples meeting every constraint;
+      `verified_yields`: per constraint; `verified_statistic`: the first constraint's exact
+      statistic there (rad for angles); `verified_values`: the first constraint's exact metric per sample.
+    - `result`: the solve's `RESULTS` code; `converged`: whether the optimiser reported success.
+    """
+
+    tolerances: dict[str, float]
+    cost: float
+    verified_yield: float
+    verified_yields: tuple[float, ...]
+    verified_statistic: float
+    verified_samples: int
+    verified_values: np.ndarray
+    result: RESULTS
+    converged: bool
+    label: str
+
+
+def _met(c: Constraint, x: np.ndarray) -> np.ndarray:
+    return x >= float(c.spec) if c.metric.higher_is_better else x <= float(c.spec)
+
+
+def _exact_stat(c: Constraint, x: np.ndarray, level: float | None = None) -> float:
+    if isinstance(c.statistic, Yield):
+        t = c.statistic.target if level is None else level
+        return float(np.quantile(x, 1.0 - t if c.metric.higher_is_better else t))
+    k = c.statistic.k  # pyright: ignore[reportAttributeAccessIssue]
+    sd = np.std(x, ddof=1)
+    return float(np.mean(x) - k * sd if c.metric.higher_is_better else np.mean(x) + k * sd)
+
+
+def _calibrate_and_verify(p: BudgetProblem, direction: dict[str, float], capped: set[str], *, key, n_check: int, label: str,
+                          result, converged: bool) -> BudgetResult:
+    """Scale the uncapped tolerances so every exact statistic on a fresh sample meets its spec with
+    a four-standard-error margin, then verify on another fresh sample."""
+    k_cal, k_ver = jax.random.split(key)
+    cal = _draws(p, k_cal, n_check)
+    ver = _draws(p, k_ver, n_check)
+    run = jax.jit(lambda t, d: metric_samples(p, t, d, exact=True))
+
+    def level(c: Constraint) -> float | None:
+        if not isinstance(c.statistic, Yield):
+            return None
+        t = c.statistic.target
+        # Four standard errors: the calibration and the verification samples each carry one
+        # binomial error, so the verified yield clears the target with ~99.8 % probability.
+        return min(t + 4 * math.sqrt(t * (1 - t) / n_check), 1 - 1.0 / n_check)
+
+    def ok(x) -> bool:
+        return all((_exact_stat(c, np.asarray(x[j]), level(c)) >= float(c.spec)) if c.metric.higher_is_better
+                   else (_exact_stat(c, np.asarray(x[j]), level(c)) <= float(c.spec)) for j, c in enumerate(p.constraints))
+
+    def at(scale):
+        return {n: jnp.asarray(direction[n] if n in capped else direction[n] * scale) for n in p.names}
+
+    if not capped and p.homogeneous:
+        # Homogeneity: the statistic of s·T is s times that of T (exact for the empirical quantile).
+        x = np.asarray(run(at(1.0), cal))
+        lo = min(float(c.spec) / _exact_stat(c, x[j], level(c)) for j, c in enumerate(p.constraints))
+    else:
+        lo, hi = 1e-3, 1e3
+        for _ in range(36):  # bisection in log scale (held sources or a non-linear drive break homogeneity)
+            mid = math.sqrt(lo * hi)
+            if ok(run(at(mid), cal)):
+                lo = mid
+            else:
+                hi = mid
+    tol = at(lo)
+    x = np.asarray(run(tol, ver))
+    met = [_met(c, x[j]) for j, c in enumerate(p.constraints)]
+    return BudgetResult(tolerances={n: float(v) for n, v in tol.items()}, cost=float(total_cost(p, tol)),
+                        verified_yield=float(np.mean(np.logical_and.reduce(met))), verified_yields=tuple(float(np.mean(m)) for m in met),
+                        verified_statistic=_exact_stat(p.constraints[0], x[0]), verified_samples=n_check, verified_values=x[0],
+                        result=result, converged=converged, label=label)
+
+
+def optimise_budget(p: BudgetProblem, *, key: int | PRNGKeyArray, n_samples: int = 4096, n_check: int = 50_000,
+                    max_steps: int = 300, throw: bool = True) -> BudgetResult:
+    """The cheapest tolerances meeting the constraints, checked on a fresh Monte Carlo sample.
+
+    **Arguments:**
+
+    - `p`: the problem (`budget_problem`).
+    - `key`: seed or key (common random numbers; the calibration and verification samples
+      use independent streams).
+    - `n_samples`: common random samples in the optimised statistics.
+    - `n_check`: fresh samples for calibration and for verification (each).
+    - `throw`: raise if the spec is infeasible within the minimum tolerances or the optimiser
+      fails (else check the result's `result`).
+
+    **Returns:** a `BudgetResult`.
+    """
+    require_x64()
+    k_crn, k_check = jax.random.split(as_key(key))
+    draws = _draws(p, k_crn, n_samples)
+    if any(float(v) > 0 for v in p.minimum.values()):
+        worst = float(jnp.max(_violation(p, metric_samples(p, p.minimum, draws))))
+        if worst > 0:
+            check(RESULTS.infeasible, throw=throw, what=f"optimise_budget: even at the minimum tolerances "
+                  f"{({n: float(v) for n, v in p.minimum.items()})} a constraint is missed by {worst:.4g}")
+            return _failed(p, RESULTS.infeasible)
+
+    def objective(y, args):
+        return _capped_cost(p, _tight(p, y, draws))
+
+    # Start from the nominal tolerances' proportions.
+    y0 = jnp.log(jnp.asarray([float(p.nominal[n]) for n in p.names]))
+    # The smoothed statistic is not smooth to machine precision: ask for 1e-6 relative cost.
+    sol = optx.minimise(objective, optx.BFGS(rtol=1e-6, atol=1e-6), y0, None, max_steps=max_steps, throw=False)
+    tol = _tight(p, sol.value, draws)
+    capped = {n for n in p.names if float(tol[n]) >= float(p.maximum[n])}
+    finer = [n for n in p.names if float(tol[n]) < float(p.minimum[n])]
+    if finer:
+        check(RESULTS.infeasible, throw=throw, what=f"optimise_budget: the cheapest budget needs {finer} finer than their "
+              "minimum tolerances")
+        return _failed(p, RESULTS.infeasible)
+    direction = {n: min(float(tol[n]), float(p.maximum[n])) for n in p.names}
+    result = RESULTS.promote(sol.result)
+    converged = bool(sol.result == optx.RESULTS.successful)
+    return _calibrate_and_verify(p, direction, capped, key=k_check, n_check=n_check, label="optimised", result=result,
+                                 converged=converged)
+
+
+def _failed(p: BudgetProblem, result) -> BudgetResult:
+    nan = float("nan")
+    return BudgetResult(tolerances={n: nan for n in p.names}, cost=nan, verified_yield=nan, verified_yields=(),
+                        verified_statistic=nan, verified_samples=0, verified_values=np.zeros(0), result=result, converged=False,
+                        label="infeasible")
+
+
+def uniform_scaling(p: BudgetProblem, *, key: int | PRNGKeyArray, n_check: int = 50_000) -> BudgetResult:
+    """Baseline: the nominal tolerances scaled by one common factor to meet the same constraints."""
+    _, k_check = jax.random.split(as_key(key))
+    return _calibrate_and_verify(p, {n: float(v) for n, v in p.nominal.items()}, set(), key=k_check, n_check=n_check,
+                                 label="uniform scaling of the nominal tolerances", result=RESULTS.successful, converged=True)
+
+
+def contributions(p: BudgetProblem, tolerances: Mapping[str, float], *, key: int | PRNGKeyArray, n_samples: int = 8192) -> dict[str, float]:
+    """Gradient contributions ∂statistic/∂T_i · T_i of the first constraint at these tolerances (rad for angles).
+
+    For a homogeneous problem (a linear drive's peak) the contributions add up to the
+    statistic itself by Euler's theorem: each is the share of the TE a source owns.
+    """
+    draws = _draws(p, as_key(key), n_samples)
+    t = {n: jnp.asarray(float(tolerances[n])) for n in p.names}
+    c0 = p.constraints[0]
+    g = eqx.filter_jit(jax.grad(lambda tt, dr: statistic(p, metric_samples(p, tt, dr)[0], c0)))(t, draws)
+    return {n: float(g[n] * t[n]) for n in p.names}
+
+
+def pareto_front(p: BudgetProblem, specs, *, key: int | PRNGKeyArray, n_samples: int = 4096, n_check: int = 50_000) -> list[BudgetResult]:
+    """Optimised budgets for each spec of the first constraint in `specs` (rad for angles): the cost-vs-spec front."""
+    out = []
+    for s in specs:
+        q = eqx.tree_at(lambda b: b.constraints[0].spec, p, jnp.asarray(float(s)))
+        out.append(optimise_budget(q, key=key, n_samples=n_samples, n_check=n_check, throw=False))
+    return out

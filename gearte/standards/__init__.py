@@ -1,0 +1,1 @@
+"""Gear accuracy standards (ISO 1328)."""

@@ -1,0 +1,1 @@
+"""Studies on any drive, through the drive protocol: laws, error models, Monte Carlo, sensitivities."""
