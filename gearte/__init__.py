@@ -6,7 +6,7 @@ building arrays; the `gearte` command does it itself.
 """
 
 from . import drives as drives
-from .core import units as units
+from . import units as units
 from .core.extrema import (
     Extrema as Extrema,
     Spectrum as Spectrum,

@@ -260,7 +260,7 @@ def cycloid_clearance_per_pin(tangential_mm, normal_mm, on_driving, *, budget_mm
 
 
 def cycloid_clearance_vs_input(input_deg, tangential_mm, normal_mm, pins, *, budget_mm: float, title: str, path):
-    """Clearance of each pin in `pins` (1-based) against the input angle over one pin pitch (the seed's figures 3–8).
+    """Clearance of each pin in `pins` (1-based) against the input angle over one pin pitch (the paper's figures 3–8).
 
     `tangential_mm`, `normal_mm`: arrays (positions, z_b).
     """

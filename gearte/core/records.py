@@ -1,7 +1,7 @@
 """Measurement-like TE records: an encoder record of any `TESignal`, its windowed spectrum, its lines and envelopes.
 
 A test bench records the TE against time at a constant input speed, with a fixed
-sample rate, for a finite time (seed 002, sec. 4: 40–80 s at 184 rpm, an FFT
+sample rate, for a finite time (Liu, sec. 4: 40–80 s at 184 rpm, an FFT
 analyser for the spectrum). `record` produces such a record from a model; the rest
 analyses any record the way such a bench would, so that the model and a measurement
 can be read side by side:
@@ -331,7 +331,7 @@ def band_envelope(signal: TESignal, theta: ArrayLike, *, band: tuple) -> np.ndar
     """Exact envelope (rad) of the lines of a TE signal whose frequencies lie in `band` (multiples of the input speed).
 
     ``|Σ_j (c_j − i s_j) e^{i k_j f₀ θ}|`` over the lines j in the band: for two lines of
-    amplitudes a₁, a₂ this is ``√(a₁² + a₂² + 2 a₁ a₂ cos(Δω θ + Δφ))`` (seed 002, sec. 3).
+    amplitudes a₁, a₂ this is ``√(a₁² + a₂² + 2 a₁ a₂ cos(Δω θ + Δφ))`` (Liu, sec. 3).
     """
     lo, hi = (Fraction(v) if not isinstance(v, float) else v for v in band)
     theta = np.asarray(theta, dtype=np.float64)

@@ -12,5 +12,6 @@ from .protocol import (
     Figure as Figure,
     SourceSpec as SourceSpec,
     StudyOutputs as StudyOutputs,
+    Trace as Trace,
 )
 from .registry import DRIVES as DRIVES

@@ -1,7 +1,7 @@
 """2K-H planetary train: eccentricity errors → transmission error.
 
 Source: Wang, Chen, Li, Chen (2013), "Coupling compensation of transmission error
-for planetary gear", Trans. CSAM 44(8):287-292 (seed 000), sections 1-2, Table 2.
+for planetary gear", Trans. CSAM 44(8):287-292, sections 1-2, Table 2.
 
 Each eccentricity, projected on a line of action (LOA), gives an equivalent mesh
 error ``±E sin((ω_member − ω_c) t + phase terms)``, because every LOA is fixed in
@@ -12,11 +12,11 @@ errors of one planet path move the output by
 
 with δ the small rotations of sun, ring and carrier and r_b the base radii. With the
 input and the fixed member at δ = 0 this gives the output error; for sun input,
-carrier output and ring fixed it is the seed's ``Δθ_sc = (e_w + e_n)/(2 a cos α)``
+carrier output and ring fixed it is the paper's ``Δθ_sc = (e_w + e_n)/(2 a cos α)``
 (eq. 9's prefactor 1/(48000 cos π/9) for Table 1).
 
 Kinematics are computed from the tooth counts (Willis), so the planet terms of the
-seed's example are at |ω_p − ω_c| = 7/24 ω_s, not the 11/24 printed in its eq. (9)
+paper's example are at |ω_p − ω_c| = 7/24 ω_s, not the 11/24 printed in its eq. (9)
 (see `wang2013.eq9_drive` for the literal equation).
 """
 
@@ -39,7 +39,7 @@ from .protocol import AbstractSinusoidalDrive, Eccentricity, SourceSpec
 MEMBERS = ("sun", "carrier", "ring")
 COUPLINGS = ("single_path", "load_sharing")
 
-#: Error sources of the 2K-H model, their phase symbols in the seed, and whether one per planet.
+#: Error sources of the 2K-H model, their phase symbols in the paper, and whether one per planet.
 SOURCES = {
     "sun_manufacturing": ("beta_s", False),
     "planet_manufacturing": ("beta_p", True),
@@ -71,7 +71,7 @@ def member_speeds(z_sun: int, z_ring: int, *, input: str, fixed: str) -> dict[st
 
 
 class Planetary2KH(AbstractSinusoidalDrive):
-    """2K-H planetary train with eccentricity errors (seed 000).
+    """2K-H planetary train with eccentricity errors (Wang et al. 2013).
 
     **Arguments:**
 
@@ -85,7 +85,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
       omitted the gears are standard and ``z_ring = z_sun + 2 z_planet`` is required.
     - `input`, `output`, `fixed`: members, each one of "sun", "carrier", "ring".
     - `coupling`: "single_path" — every planet behaves like planet 1 and planet 1's
-      path alone sets the output (the seed's assumption); or "load_sharing" — the
+      path alone sets the output (the paper's assumption); or "load_sharing" — the
       planets share the load equally (floating member or equal mesh compliance), so
       the output error is the mean of the N path errors, each with its own planet's
       errors and its own η_i (equally spaced planets then cancel the first harmonic
@@ -294,7 +294,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
             ("configuration", f"{self.input} input, {self.output} output, {self.fixed} fixed"),
             ("ratio i (input/output)", f"{self.ratio} = {float(self.ratio):.6g}"),
             ("speeds (× input): sun, carrier, ring, planet", ", ".join(f"{w[k]}" for k in ("sun", "carrier", "ring", "planet"))),
-            ("planet coupling", {"single_path": "single path: planet 1's path alone (seed's assumption)",
+            ("planet coupling", {"single_path": "single path: planet 1's path alone (the paper's assumption)",
                                  "load_sharing": "equal load sharing: mean of the N planet paths"}[self.coupling]),
             ("output error per µm of (e_w + e_n)", f"{float(self._gain()) * ARCSEC_PER_RAD:.6g}″/µm"),
         ]

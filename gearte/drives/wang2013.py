@@ -1,4 +1,4 @@
-"""The worked example of seed 000 (Wang et al. 2013, Table 1, eq. 9, Table 3)."""
+"""The worked example of Wang et al. (2013, Table 1, eq. 9, Table 3)."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def table1_drive(*, coupling: str = "single_path") -> Planetary2KH:
 
 
 def eq9_drive(*, literal: bool = True) -> ExplicitDrive:
-    """The seed's eq. (9) as explicit terms (sun input; θ = input angle).
+    """The paper's eq. (9) as explicit terms (sun input; θ = input angle).
 
     `literal=True` keeps the printed planet frequency 11/24; `literal=False` uses
     the physical 7/24 (the erratum: |ω_p − ω_c| = 7/24 ω_s for these tooth counts).
@@ -51,5 +51,5 @@ def eq9_drive(*, literal: bool = True) -> ExplicitDrive:
         ExplicitTerm("planet_assembly", 0, phase_sign=1, offset=8 * pi / 9),
         ExplicitTerm("carrier_assembly", "1/8", phase_sign=-1, offset=pi / 9),
     ]
-    name = "seed 000 eq. (9), " + ("literal (planet terms at 11/24)" if literal else "planet terms at the physical 7/24")
+    name = "Wang et al. (2013) eq. (9), " + ("literal (planet terms at 11/24)" if literal else "planet terms at the physical 7/24")
     return ExplicitDrive(terms, gain=-1.0 / (48000.0 * math.cos(ALPHA)), name=name)

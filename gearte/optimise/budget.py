@@ -137,9 +137,8 @@ def _centre(model: ErrorModel, name: str):
     if model.specs[name].kind == "eccentricity":
         return None
     law = model.sources[name].magnitude
-    if isinstance(law, AbstractValueLaw):
-        c = law.centre()
-        return None if float(c) == 0.0 else c
+    if isinstance(law, AbstractValueLaw) and law.banded:
+        return law.centre()
     return None
 
 

@@ -88,6 +88,11 @@ class AbstractValueLaw(AbstractLaw):
         """Whether the law has any spread (a constant is not an input of a sensitivity study)."""
         return True
 
+    @property
+    def banded(self) -> bool:
+        """Whether the law is a band about a centre other than 0 by construction (decided statically, not from values)."""
+        return False
+
 
 class Fixed(AbstractValueLaw):
     """Always `value` (µm or rad; may be negative for a signed deviation)."""
@@ -156,6 +161,10 @@ class Uniform(AbstractValueLaw):
     def lower(self) -> float:
         return float(self.low)
 
+    @property
+    def banded(self) -> bool:
+        return self.symmetric
+
     def centre(self):
         # A band about its middle for a signed deviation; a magnitude law is scaled about 0.
         return self._mid()[0] if self.symmetric else jnp.zeros(())
@@ -191,6 +200,10 @@ class Normal(AbstractValueLaw):
 
     def centre(self):
         return self.mean
+
+    @property
+    def banded(self) -> bool:
+        return True
 
     def scaled(self, factor: float, *, about_centre: bool = False) -> "Normal":
         if about_centre:

@@ -91,8 +91,12 @@ class _Plan(eqx.Module):
             assert isinstance(law, AbstractValueLaw)
             val_cols, ph_cols = cols[name]
             uv = u[jnp.asarray(val_cols)].reshape(spec.shape) if val_cols else jnp.full(spec.shape, 0.5)
-            c = law.centre()
-            value = c + self.scale[name] * (law.ppf(uv) - c)
+            # Scaled as a tolerance budget scales it: a band about its centre, anything else about 0.
+            if spec.kind == "deviation" and law.banded:
+                c = law.centre()
+                value = c + self.scale[name] * (law.ppf(uv) - c)
+            else:
+                value = self.scale[name] * law.ppf(uv)
             if spec.kind == "deviation":
                 out[name] = value
                 continue

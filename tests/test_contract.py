@@ -1,0 +1,178 @@
+"""One contract for every registered drive, and for a drive added the way a user adds one.
+
+Every drive in `gearte.drives.DRIVES` must come with an example study file and pass the same
+checks through the protocol alone: the study file loads and `gearte check` accepts it; zero
+errors give a TE without variation (zero for a linear drive); `vmap` over samples equals a
+Python loop; Monte Carlo values are bit-identical for any chunk size; gradients of a Monte
+Carlo mean with respect to every law parameter are finite (and match float64 finite
+differences for the toy drive); and a short `gearte run` writes every output.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import toy_drive
+
+import gearte
+from gearte import cli
+from gearte.cli.config import build_study, load_study
+from gearte.drives import DRIVES
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _examples_by_type() -> dict[str, Path]:
+    import tomllib
+
+    out: dict[str, Path] = {}
+    for p in sorted((ROOT / "examples").glob("*.toml")):
+        raw = tomllib.loads(p.read_text(encoding="utf-8"))
+        kinds = {"allocation", "budget", "modification", "sensitivity"} & set(raw)
+        t = raw.get("drive", {}).get("type")
+        # Prefer a plain Monte Carlo study of each drive (cheapest to run in full).
+        if t is not None and (t not in out or not kinds):
+            out[t] = p
+    return out
+
+
+EXAMPLES = _examples_by_type()
+
+
+@pytest.fixture(scope="module", params=sorted(DRIVES) + ["toy"])
+def case(request):
+    """(study, name) for every registered drive's example, and for the toy drive of tests/toy_drive.py."""
+    if request.param == "toy":
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setitem(DRIVES, "toy_gear_pair", toy_drive.ToyGearPair)  # the one registry line
+            import tomllib
+
+            study = build_study(tomllib.loads(toy_drive.STUDY), "toy.toml")
+        return study, "toy"
+    assert request.param in EXAMPLES, f"drive {request.param!r} has no example study file in examples/"
+    return load_study(EXAMPLES[request.param]), request.param
+
+
+def test_every_registered_drive_has_an_example():
+    assert set(DRIVES) <= set(EXAMPLES), sorted(set(DRIVES) - set(EXAMPLES))
+
+
+def test_declares_sources_and_metrics(case):
+    study, _ = case
+    drive = study.drive
+    specs = drive.error_sources
+    assert specs and all(isinstance(s, gearte.SourceSpec) and s.name == n for n, s in specs.items())
+    assert drive.metrics and all(isinstance(m, gearte.AbstractMetric) and m.name == n for n, m in drive.metrics.items())
+    assert drive.accuracy()
+    assert isinstance(drive, (gearte.AbstractSinusoidalDrive, gearte.AbstractGridDrive))
+
+
+def test_zero_errors_give_a_te_without_variation(case):
+    study, _ = case
+    drive = study.drive
+    tr = drive.trace(drive.zero_errors())
+    assert np.all(np.isfinite(tr.te))
+    scale = 1e-12 if drive.linear else 1e-9  # rad
+    assert np.ptp(tr.te) <= scale, np.ptp(tr.te)
+    if drive.linear:
+        np.testing.assert_allclose(tr.te, 0.0, atol=1e-15)
+        for m in drive.metrics.values():
+            assert float(m(drive, drive.response(drive.zero_errors()))) == pytest.approx(0.0, abs=1e-15)
+
+
+def test_vmap_equals_a_loop(case):
+    study, _ = case
+    fn = gearte.TEStudy(study.drive, study.errors, metric=study.metric)
+    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.key(7), i))(jnp.arange(3))
+    batched = np.asarray(eqx.filter_jit(jax.vmap(fn))(keys))
+    looped = np.asarray([eqx.filter_jit(fn)(k) for k in keys])
+    np.testing.assert_allclose(batched, looped, rtol=1e-12, atol=1e-300)
+    assert np.all(np.isfinite(batched))
+
+
+def test_results_do_not_depend_on_the_chunk_size(case):
+    study, _ = case
+    fn = gearte.TEStudy(study.drive, study.errors, metric=study.metric)
+    a = gearte.monte_carlo(fn, key=3, n_samples=20, block_size=4, chunk_size=8).values
+    b = gearte.monte_carlo(fn, key=3, n_samples=20, block_size=4, chunk_size=12).values
+    np.testing.assert_array_equal(a, b)
+
+
+def test_gradients_of_a_monte_carlo_mean_are_finite(case):
+    study, _ = case
+    params, static = eqx.partition(study.errors, eqx.is_inexact_array)
+    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.key(11), i))(jnp.arange(2))
+
+    def mean_metric(p):
+        fn = gearte.TEStudy(study.drive, eqx.combine(p, static), metric=study.metric)
+        return jnp.mean(jax.vmap(lambda k: study.metric.smooth(study.drive, fn.response(k)))(keys))
+
+    g = eqx.filter_jit(jax.grad(mean_metric))(params)
+    leaves = jax.tree.leaves(g)
+    assert leaves and all(bool(jnp.all(jnp.isfinite(x))) for x in leaves)
+
+
+def test_a_short_run_writes_every_output(case, tmp_path, monkeypatch, capsys):
+    study, name = case
+    if name == "toy":
+        monkeypatch.setitem(DRIVES, "toy_gear_pair", toy_drive.ToyGearPair)
+        cfg = tmp_path / "toy.toml"
+        cfg.write_text(toy_drive.STUDY)
+    else:
+        cfg = EXAMPLES[name]
+    assert cli.main(["check", str(cfg)]) == 0
+    out = tmp_path / "out"
+    assert cli.main(["run", str(cfg), "--out", str(out), "--samples", "40", "--seed", "2"]) == 0
+    for f in ("summary.json", "report.md", "samples.npz", "histogram.png", "trace.png"):
+        assert (out / f).exists(), f
+    s = json.loads((out / "summary.json").read_text())
+    assert s["te"]["n"] == 40 and s["te"]["metric"] == study.metric.name
+    for figure in (out / "report.md").read_text().split("](")[1:]:
+        assert (out / figure.split(")")[0]).exists(), figure.split(")")[0]
+
+
+def test_toy_drive_gradient_matches_finite_differences():
+    import tomllib
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(DRIVES, "toy_gear_pair", toy_drive.ToyGearPair)
+        study = build_study(tomllib.loads(toy_drive.STUDY), "toy.toml")
+    drive = study.drive
+    errs = {"pinion": gearte.Eccentricity(7.0, 0.4), "gear": gearte.Eccentricity(11.0, 2.0), "backlash": jnp.asarray(55.0)}
+
+    def lm(m1):
+        e = dict(errs, pinion=gearte.Eccentricity(m1, jnp.asarray(0.4)))
+        return study.metric(drive, drive.response(e))
+
+    g = float(jax.grad(lm)(jnp.asarray(7.0)))
+    h = 1e-6
+    fd = (float(lm(jnp.asarray(7.0 + h))) - float(lm(jnp.asarray(7.0 - h)))) / (2 * h)
+    assert g == pytest.approx(fd, rel=1e-6)
+    # Lost motion = backlash + p-p: its derivative in the backlash is 1/r_b (rad per µm).
+    gb = float(jax.grad(lambda b: study.metric(drive, drive.response(dict(errs, backlash=b))))(jnp.asarray(55.0)))
+    assert gb == pytest.approx(1e-3 / 28.2, rel=1e-12)
+
+
+def test_toy_drive_budget_through_the_generic_pipeline():
+    """A budget on a non-homogeneous metric (a backlash band about its nominal), solved by the scale search."""
+    import tomllib
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(DRIVES, "toy_gear_pair", toy_drive.ToyGearPair)
+        study = build_study(tomllib.loads(toy_drive.STUDY), "toy.toml")
+    spec = 8.0 / gearte.units.ARCMIN_PER_RAD  # 8′
+    p = gearte.budget_problem(study.drive, study.errors, costs={n: gearte.Reciprocal.normalised(t) for n, t in
+                                                                 (("pinion", 10.0), ("gear", 16.0), ("backlash", 20.0))},
+                              nominal={"pinion": 10.0, "gear": 16.0, "backlash": 20.0}, spec=spec, metric=toy_drive.LostMotion(),
+                              statistic=gearte.Yield(0.95))
+    assert not p.homogeneous
+    r = gearte.optimise_budget(p, key=1, n_samples=256, n_check=2000)
+    assert r.result == gearte.RESULTS.successful
+    assert r.verified_yield >= 0.95
+    assert r.cost < gearte.uniform_scaling(p, key=1, n_check=2000).cost * (1 + 1e-9)
