@@ -24,15 +24,16 @@ from gearte.drives import DRIVES
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "study-files.md"
 #: Tables whose keys are names of error sources (or, for the top level, tables), not schema keys.
-NAME_TABLES = {"study file", "[errors]", "[budget.costs]", "[budget.grades]", "[allocation.seed_rule]", "[budget] cost_model"}
+NAME_TABLES = {"study file", "[errors]", "[budget.costs]", "[budget.grades]", "[allocation.seed_rule]", "[budget] cost_model",
+               "[budget.costs.NAME.costs_by_grade]"}
 ANGLE = r"(deg|rad|arcmin|arcsec)"
 
 
 def _norm_table(where: str) -> str:
     where = re.sub(r"\s*#\d+$", "", where)
     where = re.sub(r"^\[errors\.[A-Za-z0-9_]+", "[errors.NAME", where)
-    where = re.sub(r"^\[budget\.(costs|grades)\.[A-Za-z0-9_]+\]$", r"[budget.\1.NAME]", where)
-    where = re.sub(r"^\[errors\.NAME\] [a-z_]+$", "[errors.NAME.value]", where)  # an amplitude's own law table
+    where = re.sub(r"^\[budget\.(costs|grades)\.[A-Za-z0-9_]+(\.costs_by_grade)?\]$", r"[budget.\1.NAME\2]", where)
+    where = re.sub(r"^\[errors\.NAME\.value\.amplitude\]$", "[errors.NAME.value]", where)  # a pattern amplitude's own law
     return where
 
 

@@ -11,6 +11,7 @@ splits it into a magnitude key and a phase key, a deviation uses it as it is.
 
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping
 
 import equinox as eqx
@@ -98,7 +99,9 @@ class ErrorModel(eqx.Module):
             if spec.kind == "eccentricity":
                 if src.phase is None:
                     raise ValueError(f"error source {n!r} is an eccentricity: give it a phase law or assembly rule")
-                if isinstance(src.magnitude, AbstractValueLaw) and src.magnitude.lower() < 0:
+                # A bounded law reaching below 0 is a mistake; a Normal magnitude (unbounded) is allowed:
+                # its negative draws are magnitudes with the phase turned by π.
+                if isinstance(src.magnitude, AbstractValueLaw) and -math.inf < src.magnitude.lower() < 0:
                     raise ValueError(f"error source {n!r}: its magnitude law ({src.magnitude.describe()}) can draw negative values; "
                                      "a magnitude cannot be negative (turn its phase by π instead)")
             elif src.phase is not None:
