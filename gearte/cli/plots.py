@@ -9,6 +9,7 @@ and its keyword arguments); the command line calls the function with ``path=``.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import matplotlib
 import numpy as np
@@ -66,7 +67,7 @@ def overlay_histograms(series, *, unit: str, metric: str, path, bins: int = 80):
     ax = fig.subplots()
     lo = min(float(np.min(v)) for _, v in series)
     hi = max(float(np.max(v)) for _, v in series)
-    edges = np.linspace(lo, hi, bins + 1) if hi > lo else bins
+    edges: Any = np.linspace(lo, hi, bins + 1) if hi > lo else bins
     colors = ["#4477aa", "#cc3311", "#228833", "#ccbb44", "#66ccee", "#aa3377", "#bbbbbb"]
     for (label, v), c in zip(series, colors * 4):
         ax.hist(v, bins=edges, histtype="stepfilled", alpha=0.35, color=c, label=f"{label} (mean {np.mean(v):.1f}{sym})")

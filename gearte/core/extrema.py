@@ -75,7 +75,7 @@ def _cis_powers(c1: Array, s1: Array, orders: tuple[int, ...]) -> tuple[Array, A
         bc, bs = c1, s1
         while k:
             if k & 1:
-                rc, rs = (bc, bs) if rc is None else (rc * bc - rs * bs, rc * bs + rs * bc)
+                rc, rs = (bc, bs) if rc is None or rs is None else (rc * bc - rs * bs, rc * bs + rs * bc)
             k >>= 1
             if k:
                 bc, bs = bc * bc - bs * bs, 2.0 * bc * bs

@@ -48,4 +48,4 @@ def check(result, *, throw: bool, what: str) -> None:
 
 def where(ok, result) -> RESULTS:
     """`result` where `ok`, else `RESULTS.successful` (a jnp-friendly select)."""
-    return RESULTS.where(jnp.asarray(ok), result, RESULTS.successful)
+    return RESULTS.where(jnp.asarray(ok), result, RESULTS.successful)  # pyright: ignore[reportArgumentType]

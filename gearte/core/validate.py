@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import math
 
+import jax
 import numpy as np
+from jax.core import Tracer
 
 
 def as_float(name: str, value, *, positive: bool = False, nonnegative: bool = False, hint: str = "") -> float:
@@ -43,8 +45,6 @@ def check_array_values(name: str, value, *, nonnegative: bool = False, unit: str
 
     JAX arrays pass unchecked: they are computed inside gearte (and may be traced).
     """
-    import jax
-
     if isinstance(value, jax.Array):
         return
     try:
@@ -56,3 +56,8 @@ def check_array_values(name: str, value, *, nonnegative: bool = False, unit: str
         raise ValueError(f"{name}: must be finite, got {value!r}")
     if nonnegative and np.any(arr < 0):
         raise ValueError(f"{name}: must be ≥ 0{u} (a magnitude cannot be negative; turn the phase by π instead), got {value!r}")
+
+
+def is_traced(value) -> bool:
+    """Whether `value` is a JAX tracer (inside jit, grad or vmap), whose values cannot be checked in Python."""
+    return isinstance(value, Tracer)

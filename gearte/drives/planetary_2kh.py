@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from fractions import Fraction
-from typing import ClassVar, Mapping, Sequence
+from typing import Any, ClassVar, Mapping, Sequence
 
 import jax.numpy as jnp
 import numpy as np
@@ -200,7 +200,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
                 raise ConfigError(f"{t.where} {key}: expected a list of numbers")
             angles = [math.radians(x) if key.endswith("deg") else float(x) for x in raw]
         centre = t.number("centre_distance_mm", None, positive=True) if t.has("centre_distance_mm") else None
-        kwargs = dict(
+        kwargs: dict[str, Any] = dict(
             module=t.number("module_mm", positive=True),
             pressure_angle=t.angle("pressure_angle", math.radians(20.0)),
             n_planets=t.integer("n_planets", minimum=1),

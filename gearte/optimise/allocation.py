@@ -18,7 +18,7 @@ Optimisation runs on smooth surrogates with optimistix (BFGS, multi-start under
 from __future__ import annotations
 
 import math
-from typing import Mapping
+from typing import Any, Mapping
 
 import equinox as eqx
 import jax
@@ -40,7 +40,7 @@ from ..studies.montecarlo import as_key, monte_carlo
 _TWO_PI = 2.0 * math.pi
 
 
-def _starts_result(results, best) -> tuple[int, RESULTS]:
+def _starts_result(results, best) -> tuple[int, Any]:
     """How many starts succeeded, and the result code of the solve: that of the best start, or
     `some_starts_failed` when it succeeded but others did not (reported, not hidden)."""
     ok = np.asarray(results == optx.RESULTS.successful)
@@ -48,6 +48,11 @@ def _starts_result(results, best) -> tuple[int, RESULTS]:
     if not best_ok:
         return int(ok.sum()), RESULTS.promote(jax.tree.map(lambda v: v[int(best)], results))
     return int(ok.sum()), RESULTS.successful if ok.all() else RESULTS.some_starts_failed
+
+
+def _partial(result) -> bool:
+    """Whether the best start succeeded but some others did not (reported, not raised)."""
+    return bool(result == RESULTS.some_starts_failed)
 
 
 def _check_drive(drive) -> None:
@@ -172,7 +177,7 @@ def allocate_measured(
         phases[n] = jnp.mod(y_best[i:i + c], _TWO_PI) if c > 1 else jnp.mod(y_best[i], _TWO_PI)
         i += c
     converged, result = _starts_result(sol.result, best)
-    check(result, throw=throw and result != RESULTS.some_starts_failed, what="allocate_measured")
+    check(result, throw=throw and not _partial(result), what="allocate_measured")
     return MeasuredAllocation(phases=phases, te=te_best, te_before=te_before, result=result, metric=metric, starts=starts,
                               converged=converged, enumerated=enumerated)
 
@@ -362,7 +367,7 @@ def worst_case(p: RuleProblem, offsets: Array, *, metric: AbstractMetric = Peak(
     group, single = _groups(p)
     if not single:
         raise ValueError("worst_case: an unknown phase drives components of several frequencies; use the expected objective")
-    return sum(metric(p.drive, sig) for _, sig in _group_parts(p, jnp.asarray(offsets, dtype=float), group))
+    return jnp.asarray(sum(metric(p.drive, sig) for _, sig in _group_parts(p, jnp.asarray(offsets, dtype=float), group)))
 
 
 def _smooth_worst_case(p: RuleProblem, offsets: Array, group: np.ndarray, width: float) -> Array:
@@ -373,7 +378,7 @@ def _smooth_worst_case(p: RuleProblem, offsets: Array, group: np.ndarray, width:
         else:
             # One frequency: amplitude = |phasor sum|, smoothed at 0.
             total = total + jnp.sum(jnp.sqrt(sig.cos_coef**2 + sig.sin_coef**2 + width**2)) + jnp.sqrt(sig.offset**2 + width**2)
-    return total
+    return jnp.asarray(total)
 
 
 def _samples(p: RuleProblem, key: PRNGKeyArray, n: int, robust: bool):
@@ -503,7 +508,7 @@ def allocate_rule(
     figures = evaluate_rule(p, y_best, key=k_check, n_check=n_check)
     converged, result = _starts_result(sol.result, best)
     # The surrogate is smooth but flat along valleys: a start that stops there is still scored exactly.
-    check(result, throw=throw and result != RESULTS.some_starts_failed, what="allocate_rule")
+    check(result, throw=throw and not _partial(result), what="allocate_rule")
     return RuleAllocation(offsets={n: y_best[i] for i, n in enumerate(p.adjust)}, worst_case=figures["worst_case"],
                           expected=figures["expected"], robust=figures["robust"], result=result, objective=objective,
                           starts=starts, converged=converged)

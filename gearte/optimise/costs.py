@@ -32,7 +32,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ..standards.iso1328 import GRADES, check_standard, grade_for_tolerance, iso1328_tolerance
-from ..core.validate import as_float
+from ..core.validate import as_float, is_traced
 
 
 def _coef(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
@@ -41,11 +41,11 @@ def _coef(name: str, value, *, positive: bool = False, nonnegative: bool = False
 
 def _tolerance(T: ArrayLike, throw: bool) -> Float[Array, "..."]:
     """T as a float array; a non-positive or non-finite tolerance is an error."""
-    if isinstance(T, jax.core.Tracer):
-        T = jnp.asarray(T, dtype=float)
+    if is_traced(T):
+        traced = jnp.asarray(T, dtype=float)
         if throw:
-            T = eqx.error_if(T, ~(jnp.isfinite(T) & (T > 0)), "cost model: tolerance T must be finite and > 0 µm")
-        return T
+            traced = eqx.error_if(traced, ~(jnp.isfinite(traced) & (traced > 0)), "cost model: tolerance T must be finite and > 0 µm")
+        return traced
     t = np.asarray(T, dtype=float)
     if not np.all(np.isfinite(t) & (t > 0)):
         raise ValueError(f"cost model: tolerance T must be finite and > 0 µm, got {T!r}")

@@ -39,6 +39,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ..core.validate import is_traced
+
 STANDARDS: tuple[str, ...] = ("1328-1:2013", "1328-1:1995")
 QUANTITIES: tuple[str, ...] = ("f_pt", "F_p", "F_alpha", "F_beta", "F_r")
 
@@ -159,6 +161,7 @@ def _grade5(quantity: str, standard: str, module, diameter, face_width, teeth) -
             f_H = 0.4 * m + 0.001 * d + 4.0
             f_f = 0.55 * m + 5.0
             return math.hypot(f_H, f_f)
+        assert b is not None  # F_beta needs it (checked above)
         f_H = 0.05 * math.sqrt(d) + 0.35 * math.sqrt(b) + 4.0
         f_f = 0.07 * math.sqrt(d) + 0.45 * math.sqrt(b) + 4.0
         return math.hypot(f_H, f_f)
@@ -174,6 +177,7 @@ def _grade5(quantity: str, standard: str, module, diameter, face_width, teeth) -
     if quantity == "F_r":
         # ISO 1328-2:1997, Annex B: F_r = 0.8 F_p.
         return 0.24 * m + 1.0 * math.sqrt(d) + 5.6
+    assert b is not None  # F_beta needs it (checked above)
     b = _range_mean("face_width", b)
     return 0.1 * math.sqrt(d) + 0.63 * math.sqrt(b) + 4.2
 
@@ -232,7 +236,7 @@ def iso1328_tolerance(
     **Returns:** the tolerance, µm, with the shape of `grade`.
     """
     base = _grade5(quantity, standard, module, diameter, face_width, teeth)
-    if not isinstance(grade, jax.core.Tracer):
+    if not is_traced(grade):
         g = np.asarray(grade, dtype=float)
         if not np.all(np.isfinite(g)):
             raise ValueError(f"grade: must be finite, got {grade!r}")
@@ -320,7 +324,7 @@ def grade_for_tolerance(
     **Returns:** the continuous grade, with the shape of `value_um`.
     """
     base = _grade5(quantity, standard, module, diameter, face_width, teeth)
-    if not isinstance(value_um, jax.core.Tracer):
+    if not is_traced(value_um):
         v = np.asarray(value_um, dtype=float)
         if not np.all(np.isfinite(v) & (v > 0)):
             raise ValueError(f"value_um: a tolerance must be finite and > 0 µm, got {value_um!r}")
@@ -387,7 +391,7 @@ def eccentricity_from_runout(F_r_um: ArrayLike) -> Float[Array, "..."]:
 
     **Returns:** eccentricity, µm, with the shape of `F_r_um`.
     """
-    if not isinstance(F_r_um, jax.core.Tracer):
+    if not is_traced(F_r_um):
         v = np.asarray(F_r_um, dtype=float)
         if not np.all(np.isfinite(v) & (v >= 0)):
             raise ValueError(f"F_r_um: a run-out must be finite and ≥ 0 µm, got {F_r_um!r}")

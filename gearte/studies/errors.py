@@ -58,7 +58,7 @@ def order_sources(sources: Mapping[str, ErrorSource]) -> list[str]:
             raise ValueError("phase rules form a cycle: " + " → ".join(chain + (name,)) + "; one phase must be random or fixed")
         state[name] = 1
         rule = sources[name].phase
-        ref = rule.to if isinstance(rule, AbstractRule) else None
+        ref = rule.reference if isinstance(rule, AbstractRule) else None
         if ref is not None:
             if ref not in sources:
                 raise ValueError(f"error source {name!r}: its phase rule refers to {ref!r}, which is not an error source here; "

@@ -322,9 +322,12 @@ class FixedPhase(AbstractPhase):
 
 
 class AbstractRule(AbstractPhase):
-    """An assembly rule: the phase follows the phase of another error source."""
+    """An assembly rule: the phase follows the phase of another error source (`reference`), or is chosen."""
 
-    to: eqx.AbstractVar[str | None]
+    @property
+    @abc.abstractmethod
+    def reference(self) -> str | None:
+        """The error source whose phase this one is set from (None: an absolute phase)."""
 
 
 class RelativePhase(AbstractRule):
@@ -343,6 +346,10 @@ class RelativePhase(AbstractRule):
             raise ValueError("RelativePhase.to: name the error source whose phase this one follows")
         self.to = to
         self.offset = jnp.asarray(_finite("RelativePhase.offset", offset))
+
+    @property
+    def reference(self) -> str:
+        return self.to
 
     def sample(self, key, shape):
         raise ValueError(f"RelativePhase: a rule relative to {self.to!r} is drawn by the error model, not on its own")
@@ -363,6 +370,10 @@ class Optimised(AbstractRule):
 
     def __init__(self, to: str | None = None):
         self.to = to
+
+    @property
+    def reference(self) -> str | None:
+        return self.to
 
     def sample(self, key, shape):
         raise ValueError("Optimised: this phase is to be chosen by the allocation optimiser; resolve the rule first "

@@ -170,7 +170,8 @@ def monte_carlo(
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1):
             raise ValueError(f"{name}: must be a whole number ≥ 1, got {v!r}")
     if block_size is None:
-        per = fn.bytes_per_sample() if hasattr(fn, "bytes_per_sample") else None
+        sizer = getattr(fn, "bytes_per_sample", None)
+        per = int(sizer()) if callable(sizer) else 0  # pyright: ignore[reportArgumentType]
         block_size = default_block_size(per) if per else 256
     block = int(block_size)
     # At least two blocks per call: XLA simplifies a loop of one trip into different code,

@@ -208,7 +208,7 @@ class SobolIndices(eqx.Module):
         for j, label in enumerate(self.inputs):
             row = {"source": self.input_source[j], "kind": self.input_kind[j], "first_order": float(self.first_order[j]),
                    "total_order": float(self.total_order[j])}
-            if self.first_order_ci is not None:
+            if self.first_order_ci is not None and self.total_order_ci is not None:
                 row["first_order_ci"] = [float(x) for x in self.first_order_ci[j]]
                 row["total_order_ci"] = [float(x) for x in self.total_order_ci[j]]
             per_input[label] = row
