@@ -37,8 +37,19 @@ from .core.signal import (
     evaluate as evaluate,
     to_signal as to_signal,
 )
-from .core.solution import RESULTS as RESULTS
+from .core.solution import RESULTS as RESULTS, result_name as result_name
 from .core.twoscale import TwoScaleExtrema as TwoScaleExtrema, extrema_two_scale as extrema_two_scale
+from .drives import (
+    CycloidAnalysis as CycloidAnalysis,
+    CycloidErrors as CycloidErrors,
+    CycloidModification as CycloidModification,
+    CycloidPin as CycloidPin,
+    LoadedPairs as LoadedPairs,
+    LoadedPairsMin as LoadedPairsMin,
+    LostMotion as LostMotion,
+    LostMotionMin as LostMotionMin,
+    RotationErrorPeakToPeak as RotationErrorPeakToPeak,
+)
 from .drives import (
     AbstractDrive as AbstractDrive,
     AbstractGridDrive as AbstractGridDrive,
@@ -82,6 +93,11 @@ from .optimise.costs import (
     Reciprocal as Reciprocal,
     ReciprocalSquare as ReciprocalSquare,
 )
+from .optimise.modification import (
+    ModificationSolution as ModificationSolution,
+    ModificationSpec as ModificationSpec,
+    optimise_modification as optimise_modification,
+)
 from .optimise.sensitivity_table import SensitivityTable as SensitivityTable, sensitivity_table as sensitivity_table
 from .standards.iso1328 import (
     eccentricity_from_runout as eccentricity_from_runout,
@@ -112,9 +128,15 @@ from .studies.montecarlo import (
     MonteCarloResult as MonteCarloResult,
     Statistics as Statistics,
     TEStudy as TEStudy,
+    as_key as as_key,
     monte_carlo as monte_carlo,
+    sample_keys as sample_keys,
     statistics as statistics,
 )
 from .studies.sensitivity import SobolIndices as SobolIndices, sobol_indices as sobol_indices
+from .studies.sensitivity_pathwise import (
+    PathwiseSensitivity as PathwiseSensitivity,
+    pathwise_sensitivities as pathwise_sensitivities,
+)
 
 __version__ = "0.2.0"

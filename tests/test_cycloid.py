@@ -1,4 +1,5 @@
-"""Cycloid-pin reducer (seed 003): geometry, clearances, Monte Carlo, sensitivities, optimiser, `gearte run`."""
+"""Cycloid-pin reducer (Yao & Liang 2001): geometry, clearances, the drive protocol, Monte Carlo, sensitivities,
+the profile-modification optimiser, and `gearte run`."""
 
 import json
 import math
@@ -13,14 +14,30 @@ from scipy.optimize import brentq, minimize_scalar
 
 import gearte
 from gearte import cli
-from gearte._distributions import Uniform, UniformPhase
 from gearte.drives import cycloid_pin as cp
-from gearte.drives.cycloid_pin import (CycloidErrors, CycloidModification, CycloidPin, clearances, first_order_clearance,
-                                       loaded_pairs, normal_clearance, pitch_angles, revolution_angles, smooth_loaded_pairs,
-                                       sweep, tooth_profile)
-from gearte.drives.cycloid_pin_optimise import optimise_modification
-from gearte.drives.cycloid_pin_studies import (CycloidStudy, CycloidTolerances, Exactly, SignedUniform, Sinusoid, sensitivities,
-                                               tolerance_sensitivities, unit_metrics)
+from gearte.drives.cycloid_pin import (
+    ERROR_FIELDS,
+    CycloidAnalysis,
+    CycloidErrors,
+    CycloidModification,
+    CycloidPin,
+    LoadedPairs,
+    LostMotion,
+    LostMotionMin,
+    RotationErrorPeakToPeak,
+    clearances,
+    first_order_clearance,
+    loaded_pairs,
+    normal_clearance,
+    pitch_angles,
+    revolution_angles,
+    smooth_loaded_pairs,
+    sweep,
+    tooth_profile,
+    unit_metrics,
+)
+from gearte.drives.cycloid_pin_outputs import sample_outputs
+from gearte.studies.sensitivity_pathwise import gradient_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 ARCSEC = 180 * 3600 / math.pi
@@ -28,12 +45,17 @@ ARCMIN = 180 * 60 / math.pi
 
 
 def basic(**kw) -> CycloidPin:
-    """The seed's stage: z_b = 26, R = 195 mm, r = 13.5 mm, a = 6 mm (K_1 = 0.8)."""
+    """The paper's stage: z_b = 26, R = 195 mm, r = 13.5 mm, a = 6 mm (K_1 = 0.8)."""
     return CycloidPin(26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, **kw)
 
 
+def modified(**kw) -> CycloidPin:
+    """The paper's stage with its modified profile (R_Z = 194.785, r_Z = 13.880 mm)."""
+    return basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88, **kw)
+
+
 def seed_errors(za: int = 25) -> CycloidErrors:
-    """The error values of the seed's figures 3–8 (spec cycloid_pin.md)."""
+    """The error values of the paper's figures 3–8."""
     return CycloidErrors(pin_circle_radius=14.0, pin_radius=-25.0, setup_eccentricity=31.5, setup_phase=math.radians(45),
                          eccentricity=20.0, mandrel_runout=5.0, dressing_x=2.0, dressing_y=2.0, disc_offset=57.5,
                          disc_offset_phase=math.radians(40), pin_wheel_offset=17.3, pin_wheel_offset_phase=math.radians(10),
@@ -85,6 +107,9 @@ def test_pin_radius_error_gives_a_uniform_normal_clearance():
     for delta_um in (-7.0, -30.0):
         nc = np.asarray(normal_clearance(d, CycloidErrors(pin_radius=delta_um), 0.3))
         np.testing.assert_allclose(nc, -delta_um * 1e-3, atol=1e-12)
+    # The errors may also be given as the protocol's mapping of source names (the others 0).
+    np.testing.assert_array_equal(np.asarray(normal_clearance(d, {"pin_radius": -7.0}, 0.3)),
+                                  np.asarray(normal_clearance(d, CycloidErrors(pin_radius=-7.0), 0.3)))
 
 
 # ---------------------------------------------------------------- closed forms of the modifications
@@ -166,12 +191,11 @@ def test_rotation_modification_gives_a_uniform_clearance():
 def test_rotation_to_contact_against_a_brute_force_search():
     """For a few pins: turn the disc (scipy brentq) until the smallest distance (scipy bounded search over the
     flank of `tooth_profile`) from the pin centre to the flank equals r′; check the sense of the constraint."""
-    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    d = modified()
     err = seed_errors()
     theta_T = 0.37
     c = clearances(d, err, theta_T)
-    e = cp.checked_errors(d, err)
-    pins = cp._pins(d, e, jnp.asarray(theta_T))
+    pins = cp.pin_layout(d, err, theta_T)
     r1 = 13.5 - 0.025
     nominal = theta_T * 26 / 25
     profile = jax.jit(lambda p, s: tooth_profile(d, p, errors=err, space=s))
@@ -180,10 +204,10 @@ def test_rotation_to_contact_against_a_brute_force_search():
         cx, cy = (float(v) for v in pins.centre[j])
         lo, hi = (0.0, math.pi) if side > 0 else (-math.pi, 0.0)
 
-        def gap(theta):
+        def gap(theta, cx=cx, cy=cy, lo=lo, hi=hi, space=space):
             x = math.cos(theta) * cx + math.sin(theta) * cy
             y = -math.sin(theta) * cx + math.cos(theta) * cy
-            f = lambda p: float(np.hypot(*(np.asarray(profile(p, space)) - (x, y))))  # noqa: E731
+            f = lambda p: float(np.hypot(*(np.asarray(profile(p, space)) - (x, y))))
             res = minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12})
             return res.fun - r1
 
@@ -197,13 +221,8 @@ def test_rotation_to_contact_against_a_brute_force_search():
 # ---------------------------------------------------------------- gradients
 
 
-def _flat_errors(err: CycloidErrors):
-    leaves, tree = jax.tree.flatten(err)
-    return leaves, tree
-
-
 def test_gradients_match_finite_differences():
-    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    d = modified()
     err = cp.checked_errors(d, seed_errors())
     err = eqx.tree_at(lambda e: (e.infeed, e.pin_tangential, e.pin_circle_eccentricity),
                       err, (jnp.linspace(-5, 5, 25), 8 * jnp.sin(jnp.arange(26.0)), jnp.asarray(6.0)))
@@ -213,7 +232,7 @@ def test_gradients_match_finite_differences():
     def f(diff):
         mod, e = diff
         dd = eqx.tree_at(lambda x: x.modification, d, mod)
-        c = cp._analyse(dd, e, jnp.asarray(theta_T), True)
+        c = clearances(dd, e, theta_T, normal=True)
         rot = jnp.where(c.reachable, c.rotation_to_contact, 0.0)
         return (jnp.sum(w * rot) * 1e4 + c.lost_motion * 1e3 + jnp.sum(w * c.normal_clearance)
                 + smooth_loaded_pairs(c, budget_mm=0.2, width_mm=0.02))
@@ -221,6 +240,7 @@ def test_gradients_match_finite_differences():
     x = (d.modification, err)
     g = jax.grad(f)(x)
     rng = np.random.default_rng(1)
+    h = 1e-3
     for _ in range(3):
         v = jax.tree.map(lambda a: jnp.asarray(rng.normal(size=np.shape(a))), x)
         # Angles get small steps, µm and mm their own scale.
@@ -228,26 +248,25 @@ def test_gradients_match_finite_differences():
             lambda e: (e.index_offset, e.indexing, e.setup_phase, e.mandrel_phase, e.disc_offset_phase,
                        e.pin_wheel_offset_phase, e.pin_circle_eccentricity_phase), v[1],
             replace_fn=lambda a: a * 1e-4))
-        h = 1e-3
         plus = jax.tree.map(lambda a, b: a + h * b, x, v)
         minus = jax.tree.map(lambda a, b: a - h * b, x, v)
         fd = (float(f(plus)) - float(f(minus))) / (2 * h)
-        ad = sum(float(jnp.sum(a * b)) for a, b in zip(jax.tree.leaves(g), jax.tree.leaves(v)))
+        ad = sum(float(jnp.sum(a * b)) for a, b in zip(jax.tree.leaves(g), jax.tree.leaves(v), strict=True))
         assert ad == pytest.approx(fd, rel=2e-5, abs=1e-9)
 
 
 def test_gradients_have_no_nans_for_pins_that_never_touch():
-    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
-    s = sensitivities(d, seed_errors(), budget_mm=0.2, positions=pitch_angles(d, 4),
-                      metrics=("lost_motion_max", "rotation_error_p2p", "loaded_pairs_smooth"))
+    d = modified()
+    metrics = (LostMotion(), RotationErrorPeakToPeak(), LoadedPairs())
+    s = cp.sensitivities(d, seed_errors(), positions=pitch_angles(d, 4), metrics=metrics)
     for sens in s.values():
         for leaf in jax.tree.leaves((sens.errors, sens.modification)):
             assert np.all(np.isfinite(np.asarray(leaf)))
     # A rotation modification δ opens both flanks by δ: the lost motion grows by 2δ (exactly without errors; the
     # wheel is turned about the grinding axis, not the bore, so the errors here shift it by ~1e-4).
-    assert float(s["lost_motion_max"].modification.rotation) == pytest.approx(2.0, rel=1e-3)
-    exact = sensitivities(d, None, budget_mm=0.2, positions=pitch_angles(d, 4))
-    assert float(exact["lost_motion_max"].modification.rotation) == pytest.approx(2.0, rel=1e-9)
+    assert float(s["lost_motion"].modification.rotation) == pytest.approx(2.0, rel=1e-3)
+    exact = cp.sensitivities(d, None, positions=pitch_angles(d, 4))
+    assert float(exact["lost_motion"].modification.rotation) == pytest.approx(2.0, rel=1e-9)
 
 
 # ---------------------------------------------------------------- bad inputs
@@ -266,83 +285,174 @@ def test_gradients_have_no_nans_for_pins_that_never_touch():
     (dict(z_pins=26.5, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0), "z_pins"),
     (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_radius=23.0), "undercut"),
     (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_circle_radius=150.0), "K = a z_b / R_Z"),
+    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, analysis=CycloidAnalysis), "analysis"),
 ])
 def test_bad_geometry_is_rejected(kwargs, match):
     with pytest.raises(ValueError, match=match):
         CycloidPin(**kwargs)
 
 
-def test_bad_error_shapes_are_rejected():
+def test_bad_error_shapes_and_laws_are_rejected():
     d = basic()
-    with pytest.raises(ValueError, match="errors.infeed: give a scalar or one value per tooth space"):
+    with pytest.raises(ValueError, match=r"errors\.infeed: give a scalar or one value per tooth space"):
         clearances(d, CycloidErrors(infeed=np.zeros(26)), 0.1)
-    with pytest.raises(ValueError, match="errors.pin_tangential"):
+    with pytest.raises(ValueError, match=r"errors\.pin_tangential"):
         clearances(d, CycloidErrors(pin_tangential=np.zeros(25)), 0.1)
-    with pytest.raises(ValueError, match="Sinusoid"):
-        CycloidTolerances(eccentricity=Sinusoid(1.0))
     with pytest.raises(ValueError, match="unknown error field"):
-        CycloidTolerances(eccentricty=Exactly(1.0))
+        clearances(d, {"eccentricty": 1.0}, 0.1)
+    with pytest.raises(ValueError, match="Sinusoid"):
+        model(d, eccentricity=gearte.Sinusoid(1.0)).sample(jax.random.key(0))
+    with pytest.raises(ValueError, match="unknown error source"):
+        model(d, eccentricty=gearte.Fixed(1.0))
     with pytest.raises(ValueError, match="half_width"):
-        SignedUniform(-1.0)
+        gearte.Uniform.centred(-1.0)
+    with pytest.raises(ValueError, match="budget_mm"):
+        CycloidAnalysis(budget_mm=-0.2)
+    with pytest.raises(ValueError, match="width_mm"):
+        CycloidAnalysis(budget_mm=0.0)
+
+
+# ---------------------------------------------------------------- the drive protocol
+
+
+def model(drive, **laws) -> gearte.ErrorModel:
+    """An error model of the drive: the given laws, every other source fixed at 0."""
+    sources = {n: gearte.ErrorSource(laws.pop(n, gearte.Fixed(0.0))) for n in drive.error_sources}
+    return gearte.ErrorModel(sources | {n: gearte.ErrorSource(v) for n, v in laws.items()}, drive.error_sources)
+
+
+def small_tolerances(drive) -> gearte.ErrorModel:
+    u = gearte.Uniform.centred
+    return model(drive, dressing_y=u(2.0), infeed=u(10.0), indexing=u(30 / ARCSEC), setup_eccentricity=gearte.Uniform(0.0, 31.5),
+                 setup_phase=gearte.UniformPhase(), pin_radius=u(16.75, -41.75), eccentricity=u(20.0),
+                 pin_tangential=gearte.Sinusoid(gearte.Uniform(0.0, 90.0), gearte.UniformPhase()), disc_offset=gearte.Uniform(40.0, 90.0),
+                 disc_offset_phase=gearte.UniformPhase())
+
+
+def test_drive_declares_its_errors_as_deviation_sources():
+    d = basic()
+    specs = d.error_sources
+    assert list(specs) == list(ERROR_FIELDS) and len(specs) == 20
+    assert all(s.kind == "deviation" for s in specs.values())
+    assert specs["infeed"].shape == (25,) and specs["pin_tangential"].shape == (26,) and specs["eccentricity"].shape == ()
+    assert specs["indexing"].unit == "rad" and specs["setup_phase"].unit == "rad" and specs["pin_radius"].unit == "µm"
+    assert d.type_name == "cycloid_pin" and not d.linear
+    assert list(d.metrics) == ["lost_motion", "lost_motion_min", "peak_to_peak", "loaded_pairs", "loaded_pairs_min"]
+    assert d.metrics["loaded_pairs"].quantity == "count" and d.metrics["loaded_pairs"].higher_is_better
+    assert "grid of 52 input angles" in d.accuracy()
+
+
+def test_error_model_draws_are_those_of_0_1():
+    """`ErrorModel.sample` draws field i of `CycloidErrors` with fold_in(key, i), as gearte 0.1's cycloid
+    tolerances did: check every field against the draw computed directly."""
+    d = basic()
+    m = small_tolerances(d)
+    key = jax.random.fold_in(jax.random.key(3), 5)
+    got = m.sample(key)
+    for i, name in enumerate(ERROR_FIELDS):
+        k = jax.random.fold_in(key, i)
+        shape = d.error_sources[name].shape
+        if name in ("dressing_y", "infeed", "indexing", "pin_radius", "eccentricity"):
+            centre, half = {"dressing_y": (0, 2.0), "infeed": (0, 10.0), "indexing": (0, 30 / ARCSEC), "pin_radius": (-41.75, 16.75),
+                            "eccentricity": (0, 20.0)}[name]
+            want = centre + half * jax.random.uniform(k, shape, dtype=float, minval=-1.0, maxval=1.0)
+        elif name in ("setup_eccentricity", "disc_offset"):
+            lo, hi = {"setup_eccentricity": (0.0, 31.5), "disc_offset": (40.0, 90.0)}[name]
+            want = lo + (hi - lo) * jax.random.uniform(k, shape, dtype=float)
+        elif name in ("setup_phase", "disc_offset_phase"):
+            want = 2 * jnp.pi * jax.random.uniform(k, shape, dtype=float)
+        elif name == "pin_tangential":
+            ka, kp = jax.random.split(k)
+            amp = 90.0 * jax.random.uniform(ka, (), dtype=float)
+            ph = 2 * jnp.pi * jax.random.uniform(kp, (), dtype=float)
+            want = amp * jnp.sin(2 * jnp.pi * jnp.arange(1, 27, dtype=float) / 26 + ph)
+        else:
+            want = jnp.zeros(shape)
+        np.testing.assert_array_equal(np.asarray(got[name]), np.asarray(want), err_msg=name)
+
+
+def test_response_is_the_sweep_over_the_grid_and_the_metrics_read_it():
+    d = modified(analysis=CycloidAnalysis(positions_per_pitch=1))
+    angles = np.asarray(d.input_angles())
+    np.testing.assert_allclose(angles, revolution_angles(d, 1), rtol=0, atol=0)
+    r = d.response(d.errors_dict(seed_errors()))
+    s = sweep(d, seed_errors(), angles, normal=False)
+    np.testing.assert_allclose(np.asarray(r.lost_motion), np.asarray(s.lost_motion), rtol=1e-12, atol=1e-15)
+    u = unit_metrics(d, seed_errors())
+    m = d.metrics
+    assert float(m["lost_motion"](d, r)) == pytest.approx(float(u["lost_motion_max"]), rel=1e-12)
+    assert float(m["lost_motion_min"](d, r)) == pytest.approx(float(u["lost_motion_min"]), rel=1e-12)
+    assert float(m["peak_to_peak"](d, r)) == pytest.approx(float(u["rotation_error_p2p"]), rel=1e-12)
+    assert float(m["loaded_pairs"](d, r)) == pytest.approx(float(u["loaded_pairs_mean"]), rel=1e-12)
+    assert float(m["loaded_pairs"].smooth(d, r)) == pytest.approx(float(u["loaded_pairs_smooth"]), rel=1e-12)
+    assert float(m["loaded_pairs_min"](d, r)) == float(u["loaded_pairs_min"])
+    # The smooth count tends to the exact one as its width → 0.
+    sharp = modified(analysis=CycloidAnalysis(positions_per_pitch=1, width_mm=1e-9))
+    assert float(m["loaded_pairs"].smooth(sharp, r)) == pytest.approx(float(u["loaded_pairs_mean"]), abs=1e-6)
+    # The trace of a unit for reports: its rotation error over the report's sweep (16 positions per pitch).
+    tr = d.trace(seed_errors())
+    te = np.asarray(sweep(d, seed_errors(), revolution_angles(d, 16), normal=False).rotation_error)
+    np.testing.assert_allclose(tr.te, te, rtol=1e-12)
+    assert (tr.max, tr.min, tr.span_revs) == (te.max(), te.min(), "1")
 
 
 # ---------------------------------------------------------------- Monte Carlo and sensitivities
 
 
-def small_tolerances():
-    return CycloidTolerances(dressing_y=SignedUniform(2.0), infeed=SignedUniform(10.0), indexing=SignedUniform(30 / ARCSEC),
-                             setup_eccentricity=Uniform(0.0, 31.5), setup_phase=UniformPhase(),
-                             pin_radius=SignedUniform(16.75, -41.75), eccentricity=SignedUniform(20.0),
-                             pin_tangential=Sinusoid(Uniform(0.0, 90.0), UniformPhase()), disc_offset=Uniform(40.0, 90.0),
-                             disc_offset_phase=UniformPhase())
+@pytest.fixture(scope="module")
+def mc_drive():
+    return modified()
 
 
-def test_monte_carlo_is_reproducible_and_matches_the_single_reducer():
-    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
-    pos = revolution_angles(d, 1)
-    st = CycloidStudy(d, small_tolerances(), budget_mm=0.2, positions=pos)
+def test_monte_carlo_is_reproducible_and_matches_the_single_reducer(mc_drive):
+    d = mc_drive
+    tol = small_tolerances(d)
+    st = gearte.TEStudy(d, tol, metric=(LostMotion(), LostMotionMin(), RotationErrorPeakToPeak()))
     # Chunks of 2 and 3 blocks: bit-identical. (A chunk of a single block may differ in the last bits: XLA
     # simplifies a one-trip loop, which changes how the Newton iterations are fused.)
     a = gearte.monte_carlo(st, key=3, n_samples=24, block_size=4, chunk_size=8).values
     b = gearte.monte_carlo(st, key=3, n_samples=24, block_size=4, chunk_size=12).values
     np.testing.assert_array_equal(a, b)
-    u = st.unpack(a)
-    assert np.all(u["not_converged"] == 0)
-    assert np.all(u["lost_motion_max"] >= u["lost_motion_min"])
+    assert np.all(a[:, 0] >= a[:, 1])
     # Sample 5 by hand: draw its errors, analyse them.
-    err = st.tolerances.sample(jax.random.fold_in(jax.random.key(3), 5), d)
-    m = unit_metrics(d, err, budget_mm=0.2, positions=pos)
+    err = tol.sample(jax.random.fold_in(jax.random.key(3), 5))
+    m = unit_metrics(d, err)
+    assert a[5, 0] == pytest.approx(float(m["lost_motion_max"]), rel=1e-12)
+    assert a[5, 2] == pytest.approx(float(m["rotation_error_p2p"]), rel=1e-12)
+    # The per-pin outputs of a study (at half a pitch, with normal clearances).
+    fn = sample_outputs(d, tol)
+    u = fn.unpack(gearte.monte_carlo(fn, key=3, n_samples=8, block_size=4, chunk_size=8).values)
+    assert np.all(u["not_converged"] == 0)
     assert u["lost_motion_max"][5] == pytest.approx(float(m["lost_motion_max"]), rel=1e-12)
-    assert u["rotation_error_p2p"][5] == pytest.approx(float(m["rotation_error_p2p"]), rel=1e-12)
     at = clearances(d, err, d.pitch / 2)
     assert u["loaded_pairs"][5] == int(loaded_pairs(at, budget_mm=0.2))
     np.testing.assert_allclose(u["normal_clearance"][5], np.asarray(at.normal_clearance), atol=1e-11)  # mm
-    # The draws follow their laws.
-    draws = jax.vmap(lambda k: st.tolerances.sample(k, d))(jax.random.split(jax.random.key(0), 4000))
-    pr = np.asarray(draws.pin_radius)
+    # The draws follow their laws (4000 draws: the mean of U(−58.5, −25) has a standard error of 0.15 µm).
+    draws = jax.vmap(tol.sample)(jax.random.split(jax.random.key(0), 4000))
+    pr = np.asarray(draws["pin_radius"])
     assert pr.min() >= -58.5 and pr.max() <= -25.0 and abs(pr.mean() + 41.75) < 0.5
-    amp = np.max(np.abs(np.asarray(draws.pin_tangential)), axis=1)
+    amp = np.max(np.abs(np.asarray(draws["pin_tangential"])), axis=1)
     assert amp.max() <= 90.0 and amp.mean() == pytest.approx(45.0, rel=0.05)
 
 
 def test_tolerance_sensitivities_match_finite_differences_with_common_random_numbers():
-    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
-    tol = CycloidTolerances(pin_radius=SignedUniform(16.75, -41.75), eccentricity=SignedUniform(20.0))
-    pos = pitch_angles(d, 4)
-    out = tolerance_sensitivities(d, tol, key=9, n_samples=16, budget_mm=0.2, positions=pos, chunk=8,
-                                  metrics=("lost_motion_max",))
-    mean, grad = out["lost_motion_max"]
+    d = modified(analysis=CycloidAnalysis(positions_per_pitch=1))
+    u = gearte.Uniform.centred
+    tol = model(d, pin_radius=u(16.75, -41.75), eccentricity=u(20.0))
+    out = gearte.pathwise_sensitivities(d, tol, LostMotion(), key=9, n_samples=16, chunk=8)
+    s = out["lost_motion"]
+    rows = {r.label: r.value for r in gradient_rows(s, tol)}
+    assert set(rows) == {"pin_radius.centre", "pin_radius.half_width", "eccentricity.centre", "eccentricity.half_width"}
     h = 0.5
 
     def mean_lm(half):
-        t = CycloidTolerances(pin_radius=SignedUniform(16.75, -41.75), eccentricity=SignedUniform(half))
-        vals = [float(unit_metrics(d, t.sample(jax.random.fold_in(jax.random.key(9), i), d), budget_mm=0.2,
-                                   positions=pos)["lost_motion_max"]) for i in range(16)]
+        t = model(d, pin_radius=u(16.75, -41.75), eccentricity=u(half))
+        vals = [float(unit_metrics(d, t.sample(jax.random.fold_in(jax.random.key(9), i)))["lost_motion_max"]) for i in range(16)]
         return np.mean(vals)
 
-    assert float(mean) == pytest.approx(mean_lm(20.0), rel=1e-12)
+    assert s.mean == pytest.approx(mean_lm(20.0), rel=1e-12)
     fd = (mean_lm(20.0 + h) - mean_lm(20.0 - h)) / (2 * h)
-    assert float(grad.laws["eccentricity"].half_width) == pytest.approx(fd, rel=1e-3, abs=1e-10)
+    assert rows["eccentricity.half_width"] == pytest.approx(fd, rel=1e-3, abs=1e-10)
 
 
 # ---------------------------------------------------------------- the optimiser
@@ -350,18 +460,28 @@ def test_tolerance_sensitivities_match_finite_differences_with_common_random_num
 
 @pytest.mark.slow
 def test_optimiser_keeps_the_lost_motion_within_spec_and_gains_pairs():
-    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    d = modified()
     am = 1 / ARCMIN
-    res = optimise_modification(d, None, lost_motion_max=20 * am, radial_clearance_min=0.2, budget_mm=0.2,
-                                positions=pitch_angles(d, 4), max_steps=60)
-    assert res.feasible
+    res = gearte.optimise_modification(d, None, lost_motion_max=20 * am, radial_clearance_min=0.2, positions=pitch_angles(d, 4),
+                                max_steps=60)
+    assert res.feasible and res.result == gearte.RESULTS.successful
     assert res.lost_motion_max <= 20 * am and res.radial_clearance >= 0.2 - 1e-12
-    assert not res.initial.feasible  # the seed's design has ~23′ of lost motion without errors
+    assert not res.initial.feasible  # the paper's design has ~23′ of lost motion without errors
     assert res.loaded_pairs_mean >= res.initial.loaded_pairs_mean
     # The reported counts are the exact ones at the reported modification.
-    m = unit_metrics(res.drive, None, budget_mm=0.2, positions=pitch_angles(d, 4))
+    m = unit_metrics(res.drive, None, positions=pitch_angles(d, 4))
     assert float(m["loaded_pairs_mean"]) == pytest.approx(res.loaded_pairs_mean)
     assert all(r in ("successful", "max_steps_reached", "nonlinear_max_steps_reached") for s in res.starts for r in s.results)
+
+
+def test_optimiser_checks_its_arguments():
+    d = modified()
+    with pytest.raises(ValueError, match="lost_motion_max"):
+        gearte.optimise_modification(d, None, lost_motion_max=-1.0)
+    with pytest.raises(ValueError, match="must exceed lost_motion_min"):
+        gearte.optimise_modification(d, None, lost_motion_max=1e-3, lost_motion_min=2e-3)
+    with pytest.raises(ValueError, match="CycloidPin"):
+        gearte.optimise_modification(gearte.Planetary2KH(12, 36, 84, module=1.0, n_planets=3), None, lost_motion_max=1e-3)
 
 
 # ---------------------------------------------------------------- gearte run
@@ -375,12 +495,12 @@ def run(*args):
 def test_example_runs_and_writes_every_output(tmp_path, capsys):
     out = tmp_path / "mod"
     assert run("run", ROOT / "examples" / "cycloid_yao2001_modified.toml", "--out", out, "--samples", 40) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["clearance_per_pin.png", "clearance_vs_input.png", "curves.npz",
+    assert sorted(p.name for p in out.iterdir()) == ["clearance_per_pin.png", "clearance_vs_input.png", "curves.npz", "histogram.png",
                                                      "monte_carlo.png", "report.md", "rotation_error.png", "samples.npz",
-                                                     "summary.json"]
+                                                     "summary.json", "trace.png"]
     s = json.loads((out / "summary.json").read_text())
-    for key in ("pairs", "contact_pair", "loaded_pairs", "deformation_budget_mm", "lost_motion_arcmin",
-                "rotation_error_p2p_arcsec", "monte_carlo", "sensitivities", "optimised_modification"):
+    for key in ("te", "pairs", "contact_pair", "loaded_pairs", "deformation_budget_mm", "lost_motion_arcmin",
+                "rotation_error_p2p_arcsec", "monte_carlo", "sensitivities", "tolerance_sensitivities", "optimised_modification"):
         assert key in s, key
     assert len(s["pairs"]) == 26 and s["deformation_budget_mm"] == 0.2 and s["loaded_pairs_out_of"] == 13
     contact = s["contact_pair"]["pin"]
@@ -391,20 +511,24 @@ def test_example_runs_and_writes_every_output(tmp_path, capsys):
     assert sum(p["on_driving_flank"] for p in s["pairs"]) == 13
     assert s["sweep"]["all_solves_converged"]
     # The numbers agree with the library called directly.
-    d = basic(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88)
+    d = modified()
     c = clearances(d, seed_errors(), d.pitch / 2)
     assert contact == int(c.contact_pin) + 1
     assert s["lost_motion_at_input_angle_arcmin"] == pytest.approx(float(c.lost_motion) * ARCMIN, rel=1e-12)
     assert s["optimised_modification"]["best"]["feasible"]
+    # The study metric's statistics are those of the Monte Carlo's lost motion.
+    assert s["te"]["metric"] == "lost_motion" and s["te"]["mean"] == pytest.approx(s["monte_carlo"]["lost_motion_max_arcmin"]["mean"], rel=1e-12)
+    with np.load(out / "curves.npz") as z:  # the reference reducer's curves
+        assert z["pitch_tangential_clearance_mm"].shape == (64, 26) and z["lost_motion_arcmin"].ndim == 1
     report = (out / "report.md").read_text()
     for needed in ("contacting pair", "loaded pairs", "lost motion", "Monte Carlo", "float64"):
         assert needed in report, needed
-    assert "loaded pairs" in capsys.readouterr().out
+    assert "lost_motion" in capsys.readouterr().out
 
 
 @pytest.mark.slow
 def test_unmodified_example_has_more_loaded_pairs(tmp_path):
-    mod = json.loads(json.dumps(_summary(tmp_path, "cycloid_yao2001_modified.toml")))
+    mod = _summary(tmp_path, "cycloid_yao2001_modified.toml")
     unmod = _summary(tmp_path, "cycloid_yao2001_unmodified.toml")
     assert unmod["loaded_pairs"] > mod["loaded_pairs"]
     assert unmod["lost_motion_arcmin"] < mod["lost_motion_arcmin"]
@@ -412,11 +536,11 @@ def test_unmodified_example_has_more_loaded_pairs(tmp_path):
 
 def _summary(tmp_path, name):
     text = (ROOT / "examples" / name).read_text()
-    text = text.split("[tolerances]")[0] + "[sensitivity]\nsamples = 0\n"  # the reducer analysed only: fast
+    text = text.split("# Monte Carlo:")[0]  # the reducer analysed only (every error law left out): fast
     p = tmp_path / name
     p.write_text(text)
     out = tmp_path / (name + ".out")
-    assert run("run", p, "--out", out) == 0
+    assert run("run", p, "--out", out, "--samples", 8) == 0
     return json.loads((out / "summary.json").read_text())
 
 
@@ -429,9 +553,13 @@ def _summary(tmp_path, name):
     (("disc_offset_um = 57.5", "disc_ofset_um = 57.5"), "disc_ofset_um"),
     (("disc_offset_um = 57.5", "disc_offset_mm = 0.0575"), "disc_offset_um"),
     (("infeed_um = 0 ", "infeed_um = [1, 2] "), "infeed_um"),
-    (('pin_radius = { law = "uniform", low_um = -58.5, high_um = -25 }', 'pin_radius = { law = "uniform", low_um = -25, high_um = -58.5 }'), "high_um"),
-    (('eccentricity = { law = "uniform", half_width_um = 20 }', 'eccentricity = { law = "sinusoid", amplitude_um = 20 }'), "sinusoid"),
+    (('value = { law = "uniform", low_um = -58.5, high_um = -25 }', 'value = { law = "uniform", low_um = -25, high_um = -58.5 }'),
+     "pin_radius.value] high"),
+    (('[errors.eccentricity]\nvalue = { law = "uniform", half_width_um = 20 }', '[errors.eccentricity]\nvalue = { law = "sinusoid", amplitude_um = 20 }'),
+     "sinusoid"),
     (("lost_motion_max_arcmin = 25", "lost_motion_max_arcmin = -1"), "lost_motion_max_arcmin"),
+    (("positions_per_pitch = 2 ", "positions_per_pitch = 0 "), "positions_per_pitch"),
+    (('metric = "lost_motion"', 'metric = "lost_motoin"'), "lost_motion"),
 ])
 def test_bad_config_exits_2_naming_the_field(tmp_path, capsys, edit, match):
     text = (ROOT / "examples" / "cycloid_yao2001_modified.toml").read_text()
@@ -456,10 +584,11 @@ def test_check_accepts_the_examples(capsys):
 def test_new_error_values_and_modifications_do_not_recompile():
     @eqx.filter_jit
     @eqx.debug.assert_max_traces(max_traces=1)
-    def lost_motion(drive, errors, theta):
-        return cp._analyse(drive, errors, theta, False).lost_motion
+    def lost_motion(drive, errors):
+        return LostMotion()(drive, drive.response(errors))
 
+    grid = CycloidAnalysis(positions_per_pitch=1)
     for k, mod in enumerate((CycloidModification(), CycloidModification(-0.2, 0.4), CycloidModification(0.1, 0.3, 1e-4))):
-        d = basic(modification=mod)
-        e = cp.checked_errors(d, CycloidErrors(pin_radius=-5.0 * k, indexing=np.full(25, 1e-5 * k), disc_offset=3.0 * k))
-        lost_motion(d, e, jnp.asarray(0.1 * k))
+        d = basic(modification=mod, analysis=grid)
+        e = d.errors_dict(CycloidErrors(pin_radius=-5.0 * k, indexing=np.full(25, 1e-5 * k), disc_offset=3.0 * k))
+        lost_motion(d, e)

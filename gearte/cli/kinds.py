@@ -5,8 +5,12 @@ from __future__ import annotations
 from .allocation_kind import Allocation
 from .budget_kind import Budget
 from .kind_base import AbstractStudyKind
+from .modification_kind import Modification
+from .sensitivity_kind import Sensitivity
 
 STUDY_KINDS: tuple[AbstractStudyKind, ...] = (
     Allocation(),
     Budget(),
+    Sensitivity(),
+    Modification(),
 )

@@ -198,6 +198,28 @@ def histogram_vs_estimate(values, stats, *, estimates, unit: str, metric: str, t
     fig.savefig(path)
 
 
+def histogram_with_estimates(values, *, percentiles, estimates, unit: str, metric: str, title: str, path, bins: int = 80):
+    """Monte Carlo histogram with its median and P99.73 and vertical lines for design estimates.
+
+    Plain data, as a `gearte.drives.Figure` declares it: `percentiles` = {"50": …, "99.73": …}
+    (in `unit`), `estimates` = [(value, label)].
+    """
+    sym = UNIT_SYMBOLS[unit]
+    fig = Figure(figsize=(9, 4.8), dpi=110)
+    ax = fig.subplots()
+    ax.hist(values, bins=bins, color="#4477aa", alpha=0.85, edgecolor="white", linewidth=0.3)
+    for p, style in (("50", "--"), ("99.73", "-.")):
+        ax.axvline(percentiles[p], color="#222222", linestyle=style, linewidth=1.0, label=f"Monte Carlo P{p} = {percentiles[p]:.2f}{sym}")
+    for (v, label), c in zip(estimates, ["#cc3311", "#ee7733", "#aa3377"]):
+        ax.axvline(v, color=c, linewidth=1.6, label=label)
+    ax.set_xlabel(f"{_METRIC_LABEL.get(metric, metric)} ({sym})")
+    ax.set_ylabel("units")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path)
+
+
 def trace_pair(theta_rev, te_a, te_b, *, unit: str, labels, title: str, path):
     """Two TE traces of the same parts over the hyper-period (e.g. before and after allocation)."""
     sym = UNIT_SYMBOLS[unit]

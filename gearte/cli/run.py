@@ -44,10 +44,11 @@ def sample_errors(study: Study, index: int) -> dict:
 class RunContext(AbstractStudyContext):
     """What a drive's `study_outputs` is given: the study's settings, values and Monte Carlo."""
 
-    def __init__(self, study: Study, values_rad: np.ndarray, progress: bool | None):
+    def __init__(self, study: Study, values_rad: np.ndarray, outputs: dict[str, np.ndarray], progress: bool | None):
         self.study = study
         self.unit, self.seed, self.samples, self.chunk_size = study.unit, study.seed, study.samples, study.chunk_size
         self.progress, self.values_rad, self.model, self.metric = progress, values_rad, study.errors, study.metric
+        self.outputs = outputs
 
     def monte_carlo(self, fn, *, desc: str) -> np.ndarray:
         return monte_carlo(fn, key=self.seed, n_samples=self.samples, chunk_size=self.chunk_size, progress=self.progress,
@@ -55,6 +56,20 @@ class RunContext(AbstractStudyContext):
 
     def sample_errors(self, index: int) -> dict:
         return sample_errors(self.study, index)
+
+
+class _RunSample(equinox.Module):
+    """One sample of a run: the study's metric and the drive's per-sample outputs, from one response."""
+
+    study: TEStudy
+
+    def __call__(self, key):
+        errors = self.study.errors.sample(key)
+        response = self.study.drive.response(errors)
+        return self.study.metric(self.study.drive, response), self.study.drive.sample_outputs(errors, response)
+
+    def bytes_per_sample(self) -> int:
+        return self.study.bytes_per_sample()
 
 
 def _trace_in_unit(study: Study, index: int) -> tuple[np.ndarray, np.ndarray]:
@@ -79,9 +94,9 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
             outcome = kind.run(study, study.kinds[kind.table], progress=progress)
             outcomes.append(outcome)
             study = outcome.study
-    te_study = TEStudy(study.drive, study.errors, metric=study.metric)
-    mc = monte_carlo(te_study, key=study.seed, n_samples=study.samples, chunk_size=study.chunk_size, progress=progress, desc=study.name)
-    values_rad = mc.values
+    mc = monte_carlo(_RunSample(TEStudy(study.drive, study.errors, metric=study.metric)), key=study.seed, n_samples=study.samples,
+                     chunk_size=study.chunk_size, progress=progress, desc=study.name)
+    values_rad, outputs = mc.values
     angle = study.metric.quantity == "angle"
     values = angle_from_rad(values_rad, study.unit) if angle else values_rad
     unit = study.unit if angle else "pairs"
@@ -133,7 +148,7 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
     if original.errors is not study.errors and "allocation" not in summary:
         summary["study"]["source_rules"] = {n: s.phase.describe() for n, s in original.errors.sources.items() if s.phase is not None}
 
-    extra = study.drive.study_outputs(RunContext(study, values_rad, progress))
+    extra = study.drive.study_outputs(RunContext(study, values_rad, outputs, progress))
     clash = set(extra.summary) & set(summary)
     if clash:
         raise ValueError(f"{type(study.drive).__name__}.study_outputs: keys {sorted(clash)} are already in summary.json")
@@ -146,6 +161,8 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
         arrays = {"te": values, "te_rad": values_rad, "unit": unit, "metric": study.metric.name, "seed": study.seed,
                   "index": np.arange(study.samples)} | dict(extra.arrays)
         np.savez_compressed(tmp / "samples.npz", **arrays)
+        for name, content in extra.files.items():
+            np.savez_compressed(tmp / name, **content)
         plots.histogram(values, stats, unit=study.unit, metric=study.metric.label, title=study.title, path=tmp / "histogram.png")
         plots.trace(tr.theta / (2 * math.pi), te_trace, unit=study.unit, path=tmp / "trace.png",
                     title=f"TE of a typical sample (#{typical}, {study.metric.name} {values[typical]:.1f}{sym if angle else ''}) "

@@ -43,6 +43,8 @@ class AbstractMetric(eqx.Module):
     quantity: ClassVar[Quantity]
     higher_is_better: ClassVar[bool] = False
     homogeneous: ClassVar[bool] = False
+    #: The unit reports use for this metric (e.g. "arcmin" for a lost motion); None: the study's unit.
+    report_unit: ClassVar[str | None] = None
 
     @abc.abstractmethod
     def __call__(self, drive: Any, response: Any) -> Float[Array, ""]:

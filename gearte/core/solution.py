@@ -31,6 +31,15 @@ def is_successful(result) -> bool:
     return bool(np.all(np.asarray(result == RESULTS.successful)))
 
 
+def result_name(result) -> str:
+    """The name of a concrete `RESULTS` (or optimistix result) item, e.g. ``"successful"``."""
+    r = result if getattr(result, "_enumeration", None) is RESULTS else RESULTS.promote(result)
+    for name, item in RESULTS._name_to_item.items():  # pyright: ignore[reportAttributeAccessIssue]
+        if bool(r == item):
+            return name
+    return "unknown"
+
+
 def message(result) -> str:
     """The text of a concrete result (the first failing entry of a batched one)."""
     flat = np.asarray(result._value).ravel()  # pyright: ignore[reportAttributeAccessIssue]

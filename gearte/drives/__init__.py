@@ -1,6 +1,18 @@
 """Drive models: the protocol every drive implements, one file per drive, and the registry."""
 
-from . import wang2013 as wang2013
+from . import cycloid_pin as cycloid_pin, wang2013 as wang2013
+from .cycloid_pin import (
+    Clearances as Clearances,
+    CycloidAnalysis as CycloidAnalysis,
+    CycloidErrors as CycloidErrors,
+    CycloidModification as CycloidModification,
+    CycloidPin as CycloidPin,
+    LoadedPairs as LoadedPairs,
+    LoadedPairsMin as LoadedPairsMin,
+    LostMotion as LostMotion,
+    LostMotionMin as LostMotionMin,
+    RotationErrorPeakToPeak as RotationErrorPeakToPeak,
+)
 from .explicit import ExplicitDrive as ExplicitDrive, ExplicitTerm as ExplicitTerm
 from .planetary_2kh import Planetary2KH as Planetary2KH, member_speeds as member_speeds
 from .protocol import (

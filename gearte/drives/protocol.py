@@ -114,12 +114,14 @@ class Figure:
 
 @dataclasses.dataclass
 class StudyOutputs:
-    """What a drive adds to a `gearte run`: summary entries, report sections, figures, sample arrays."""
+    """What a drive adds to a `gearte run`: summary entries, report sections, figures, arrays saved
+    beside the samples (`arrays`, in samples.npz) and further .npz files (`files`: file name → arrays)."""
 
     summary: dict = dataclasses.field(default_factory=dict)
     report: list[str] = dataclasses.field(default_factory=list)
     figures: list[Figure] = dataclasses.field(default_factory=list)
     arrays: dict = dataclasses.field(default_factory=dict)
+    files: dict = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass
@@ -147,6 +149,7 @@ class AbstractStudyContext(abc.ABC):
     chunk_size: int | None
     progress: bool | None
     values_rad: np.ndarray
+    outputs: dict[str, np.ndarray]  # the drive's `sample_outputs` of every sample
     model: Any  # the ErrorModel of the study
     metric: AbstractMetric
 
@@ -205,6 +208,12 @@ class AbstractDrive(eqx.Module):
     def bytes_per_sample(self) -> int:
         """Rough peak working memory of one Monte Carlo sample (bytes), to size blocks."""
         return 2048
+
+    def sample_outputs(self, errors: Errors, response: Any) -> dict[str, Array]:
+        """Per-sample arrays a `gearte run` keeps beside the metric, computed in the same Monte Carlo
+        pass from the same response (given to `study_outputs` as ``context.outputs``); none by default."""
+        del errors, response
+        return {}
 
     def study_outputs(self, context: AbstractStudyContext) -> StudyOutputs:
         """Outputs of a `gearte run` beyond the metric's statistics (none by default)."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from .cycloid_pin import CycloidPin
 from .explicit import ExplicitDrive
 from .planetary_2kh import Planetary2KH
 from .protocol import AbstractDrive
@@ -11,5 +12,6 @@ DRIVES: dict[str, type[AbstractDrive]] = {
     for cls in (
         Planetary2KH,
         ExplicitDrive,
+        CycloidPin,
     )
 }

@@ -1,24 +1,28 @@
-"""Cycloid-pin reducer: choose the profile modification by gradient (spec cycloid_pin.md, last section).
+"""The profile modification of a cycloid-pin disc, chosen by gradient (Yao & Liang 2001; `gearte.drives.cycloid_pin`).
 
 Problem: choose the shift ΔR_Z and equidistant Δr_Z (and, optionally, the rotation δ) that
 keep the lost motion within a spec, leave a radial clearance at root and tip (lubrication,
-assembly), and maximise the number of pairs that can carry load under a tangential
+assembly), and maximise the number of pairs that can carry load under the drive's tangential
 deformation budget — for one reducer's errors (or none).
 
 The count of loaded pairs is piecewise constant, so the optimiser maximises a smooth
 surrogate, the mean over input positions of Σ σ((budget − arc_j)/w) over the driving pins,
 with quadratic penalties on the constraints (lost motion in units of 1′, radial clearance in
 units of 10 µm) and a continuation in the penalty weight 10 → 10³ → 10⁵. Every start is solved
-with optimistix's BFGS (``throw=False``; the result code of every solve is reported); the
-answer is the start whose *exact* metrics are best among the feasible ones (most loaded pairs
-on average over the positions — what the surrogate maximises —, then at their minimum, then
-the smallest lost motion).
+with optimistix's BFGS (``throw=False``; the result code of every solve is kept); the answer is
+the start whose *exact* metrics are best among the feasible ones (most loaded pairs on average
+over the positions — what the surrogate maximises —, then at their minimum, then the smallest
+lost motion).
+
+A study file asks for it with a ``[modification]`` table (`ModificationSpec`); the summary
+entry and report section are `modification_summary` and `modification_report`.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -27,16 +31,23 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import ArrayLike
 
-from .._precision import require_x64
-from .cycloid_pin import CycloidErrors, CycloidPin, CycloidModification, check_modification, checked_errors, revolution_angles
-from .cycloid_pin_studies import _metrics, _metrics_jit
+from ..core.precision import require_x64
+from ..core.schema import ConfigError, Table
+from ..core.solution import RESULTS, check, result_name
+from ..core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD
+from ..drives.cycloid_pin import CycloidPin
+from ..drives.cycloid_pin_contact import revolution_angles
+from ..drives.cycloid_pin_geometry import CycloidErrors, CycloidModification, check_modification, checked_errors
+from ..drives.cycloid_pin_metrics import grid_metrics, grid_metrics_jit
 
 ARCMIN = math.pi / (180.0 * 60.0)  # rad per ′
 PENALTY_WEIGHTS = (10.0, 1e3, 1e5)
 
 
 class ModificationStart(eqx.Module):
-    """One start of `optimise_modification`: where it began and ended, and how the solver finished."""
+    """One start of `optimise_modification`: where it began and ended (ΔR_Z, Δr_Z[, δ·R_z] in mm), how the
+    solver finished at each penalty weight (`results`: names of `gearte.RESULTS` items; `steps`), and the
+    exact metrics there (lost motion in rad, radial clearance in mm)."""
 
     start: tuple[float, ...]
     end: tuple[float, ...]
@@ -50,7 +61,7 @@ class ModificationStart(eqx.Module):
     feasible: bool
 
 
-class ModificationResult(eqx.Module):
+class ModificationSolution(eqx.Module):
     """The optimised modification and its exact metrics.
 
     - `modification`, `drive`: the best modification and the stage that carries it.
@@ -59,6 +70,7 @@ class ModificationResult(eqx.Module):
     - `feasible`: the constraints hold exactly.
     - `starts`: every start (`ModificationStart`), in the order tried.
     - `initial`: the same metrics for the drive's own modification (a `ModificationStart`).
+    - `result`: `RESULTS.successful`, or `RESULTS.infeasible` when no start meets the constraints.
     """
 
     modification: CycloidModification
@@ -71,6 +83,7 @@ class ModificationResult(eqx.Module):
     feasible: bool
     starts: tuple
     initial: ModificationStart
+    result: RESULTS
 
 
 def _with(drive: CycloidPin, x, rotation: bool) -> CycloidPin:
@@ -99,48 +112,48 @@ def _default_starts(drive: CycloidPin, target_rad: float, radial_min: float, rot
     return starts
 
 
-def optimise_modification(drive: CycloidPin, errors: CycloidErrors | None = None, *, lost_motion_max: float,
-                          budget_mm: float, lost_motion_min: float = 0.0, radial_clearance_min: float = 0.0,
-                          positions: ArrayLike | None = None, width_mm: float | None = None, rotation: bool = False,
-                          starts: Sequence[Sequence[float]] | None = None, max_steps: int = 200) -> ModificationResult:
+def optimise_modification(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] | None = None, *, lost_motion_max: float,
+                          lost_motion_min: float = 0.0, radial_clearance_min: float = 0.0, positions: ArrayLike | None = None,
+                          rotation: bool = False, starts: Sequence[Sequence[float]] | None = None, max_steps: int = 200,
+                          throw: bool = True) -> ModificationSolution:
     """Choose the modification that maximises the loaded pairs with the lost motion within a spec.
 
     **Arguments:**
 
-    - `drive`: the stage (its own modification is reported as `initial`).
+    - `drive`: the stage (its own modification is reported as `initial`; its deformation budget
+      and smoothing width, `drive.analysis`, define the loaded pairs).
     - `errors`: the reducer's errors (None: an error-free reducer).
     - `lost_motion_max`: the lost-motion spec, rad (over all `positions`).
-    - `budget_mm`: tangential deformation budget on the pin circle, mm.
     - `lost_motion_min`: required lost motion (backlash), rad (default 0: no interference).
     - `radial_clearance_min`: required radial clearance at root and tip Δr_Z − ΔR_Z, mm.
     - `positions`: input angles, rad (default one input revolution, 2 per pin pitch).
-    - `width_mm`: smoothing width of the count surrogate, mm (default budget/10).
     - `rotation`: also optimise a rotation modification δ.
     - `starts`: starting points (ΔR_Z, Δr_Z[, δ R_z]) in mm (default: spread over the split of
       the lost motion between the modifications).
     - `max_steps`: BFGS steps per penalty weight.
+    - `throw`: raise if no start meets the constraints (else check `result`).
 
-    **Returns:** a `ModificationResult` with the exact count and constraints at the optimum.
+    **Returns:** a `ModificationSolution` with the exact count and constraints at the optimum.
     """
     require_x64()
+    if not isinstance(drive, CycloidPin):
+        raise ValueError(f"drive: expected a CycloidPin, got {type(drive).__name__}")
     for name, v in (("lost_motion_max", lost_motion_max), ("lost_motion_min", lost_motion_min),
-                    ("radial_clearance_min", radial_clearance_min), ("budget_mm", budget_mm)):
+                    ("radial_clearance_min", radial_clearance_min)):
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
             raise ValueError(f"{name}: must be a finite number ≥ 0, got {v!r}")
     if not lost_motion_max > lost_motion_min:
         raise ValueError(f"lost_motion_max ({lost_motion_max:g} rad) must exceed lost_motion_min ({lost_motion_min:g} rad)")
-    b = float(budget_mm)
-    w = b / 10.0 if width_mm is None else float(width_mm)
-    if not (math.isfinite(w) and w > 0):
-        raise ValueError(f"width_mm: must be > 0 mm, got {width_mm!r}")
     err = checked_errors(drive, errors)
     pos = jnp.asarray(revolution_angles(drive, 2) if positions is None else positions, dtype=float)
+    if pos.ndim != 1 or pos.size == 0:
+        raise ValueError(f"positions: give a 1-D array of input angles (rad), got shape {pos.shape}")
     lm_hi, lm_lo, c_lo = float(lost_motion_max), float(lost_motion_min), float(radial_clearance_min)
     n = 3 if rotation else 2
 
     def exact(x) -> ModificationStart:
         d = _with(drive, jnp.asarray(x, dtype=float), rotation)
-        m = _metrics_jit(d, err, pos, b, w)
+        m = grid_metrics_jit(d, err, pos)
         radial = float(x[1] - x[0])
         ok = (float(m["lost_motion_max"]) <= lm_hi * (1 + 1e-9) and float(m["lost_motion_min"]) >= lm_lo - 1e-12
               and radial >= c_lo - 1e-12)
@@ -159,7 +172,7 @@ def optimise_modification(drive: CycloidPin, errors: CycloidErrors | None = None
 
     def objective(x, mu):
         d = _with(drive, x, rotation)
-        m = _metrics(d, err, pos, b, w)
+        m = grid_metrics(d, err, pos)
         v1 = jax.nn.relu(m["lost_motion_max"] - hi_t) / ARCMIN
         v2 = jax.nn.relu(lo_t - m["lost_motion_min"]) / ARCMIN
         v3 = jax.nn.relu(c_t - (x[1] - x[0])) / 0.01
@@ -176,7 +189,7 @@ def optimise_modification(drive: CycloidPin, errors: CycloidErrors | None = None
     x_init = np.array([float(m0.shift), float(m0.equidistant)] + ([float(m0.rotation) * float(drive.pin_circle_radius)] if rotation else []))
     if starts is None:
         target = lm_hi if lm_lo == 0 else 0.5 * (lm_lo + lm_hi)
-        start_list = [x_init] + _default_starts(drive, 0.9 * target if lm_lo == 0 else target, c_lo, rotation)
+        start_list = [x_init, *_default_starts(drive, 0.9 * target if lm_lo == 0 else target, c_lo, rotation)]
     else:
         start_list = [np.asarray(s, dtype=float) for s in starts]
         for s in start_list:
@@ -188,7 +201,7 @@ def optimise_modification(drive: CycloidPin, errors: CycloidErrors | None = None
         codes, steps = [], []
         for mu in PENALTY_WEIGHTS:
             x_new, res, k = solve(x, jnp.asarray(mu))
-            codes.append(_result_name(res))
+            codes.append(result_name(res))
             steps.append(int(k))
             if bool(jnp.all(jnp.isfinite(x_new))):
                 x = x_new
@@ -204,17 +217,102 @@ def optimise_modification(drive: CycloidPin, errors: CycloidErrors | None = None
     best = max(tried, key=rank)
     init = exact(x_init)
     d_best = _with(drive, jnp.asarray(best.end, dtype=float), rotation)
-    return ModificationResult(modification=d_best.modification, drive=d_best, loaded_pairs_min=best.loaded_pairs_min,
-                              loaded_pairs_mean=best.loaded_pairs_mean, lost_motion_max=best.lost_motion_max,
-                              lost_motion_min=best.lost_motion_min, radial_clearance=best.radial_clearance,
-                              feasible=best.feasible, starts=tuple(tried), initial=init)
+    result: RESULTS = RESULTS.successful if best.feasible else RESULTS.infeasible  # pyright: ignore[reportAssignmentType]
+    sol = ModificationSolution(modification=d_best.modification, drive=d_best, loaded_pairs_min=best.loaded_pairs_min,
+                               loaded_pairs_mean=best.loaded_pairs_mean, lost_motion_max=best.lost_motion_max,
+                               lost_motion_min=best.lost_motion_min, radial_clearance=best.radial_clearance,
+                               feasible=best.feasible, starts=tuple(tried), initial=init, result=result)
+    check(result, throw=throw, what="optimise_modification")
+    return sol
 
 
-def _result_name(res) -> str:
-    for name in ("successful", "max_steps_reached", "nonlinear_max_steps_reached", "nonlinear_divergence"):
-        if hasattr(optx.RESULTS, name) and res == getattr(optx.RESULTS, name):
-            return name
-    return str(optx.RESULTS[res]) if hasattr(optx.RESULTS, "__getitem__") else "failed"
+# ---------------------------------------------------------------- the study kind [modification]
 
 
-__all__ = ("ModificationResult", "ModificationStart", "optimise_modification")
+class ModificationSpec(eqx.Module):
+    """``[modification]`` of a cycloid-pin study: choose R_Z, r_Z (and δ) for the reference reducer.
+
+    Keys: ``lost_motion_max_arcmin`` (required, > 0), ``lost_motion_min_arcmin`` (0),
+    ``radial_clearance_min_mm`` (0), ``rotation`` (false), ``positions_per_pitch`` (2; over the
+    drive's ``[drive.analysis] revolutions``).
+    """
+
+    lost_motion_max_arcmin: float = eqx.field(static=True)
+    lost_motion_min_arcmin: float = eqx.field(static=True)
+    radial_clearance_min_mm: float = eqx.field(static=True)
+    rotation: bool = eqx.field(static=True)
+    positions_per_pitch: int = eqx.field(static=True)
+
+    @classmethod
+    def from_table(cls, t: Table, drive: Any) -> ModificationSpec:
+        """Read a ``[modification]`` table (the caller refuses unknown keys); `drive` must be a `CycloidPin`."""
+        if not isinstance(drive, CycloidPin):
+            raise ConfigError(f"{t.where}: the profile-modification optimiser is for a cycloid-pin reducer "
+                              f"([drive] type = \"cycloid_pin\"), not {getattr(drive, 'type_name', type(drive).__name__)}")
+        hi = t.number("lost_motion_max_arcmin", positive=True)
+        lo = t.number("lost_motion_min_arcmin", 0.0, minimum=0)
+        if not hi > lo:
+            raise ConfigError(f"{t.where} lost_motion_max_arcmin: must exceed lost_motion_min_arcmin ({lo:g}′), got {hi:g}′")
+        return cls(lost_motion_max_arcmin=hi, lost_motion_min_arcmin=lo,
+                   radial_clearance_min_mm=t.number("radial_clearance_min_mm", 0.0, minimum=0),
+                   rotation=t.boolean("rotation", False), positions_per_pitch=t.integer("positions_per_pitch", 2, minimum=1))
+
+    def constraints(self) -> dict:
+        """The spec as the summary's ``constraints`` entry."""
+        return {"lost_motion_max_arcmin": self.lost_motion_max_arcmin, "lost_motion_min_arcmin": self.lost_motion_min_arcmin,
+                "radial_clearance_min_mm": self.radial_clearance_min_mm, "rotation": self.rotation,
+                "positions_per_pitch": self.positions_per_pitch}
+
+    def solve(self, drive: CycloidPin, *, throw: bool = False) -> ModificationSolution:
+        """Optimise the modification for the drive's reference reducer."""
+        positions = revolution_angles(drive, self.positions_per_pitch, revolutions=drive.analysis.sweep_revolutions)
+        return optimise_modification(drive, drive.reference, lost_motion_max=self.lost_motion_max_arcmin / ARCMIN_PER_RAD,
+                                     lost_motion_min=self.lost_motion_min_arcmin / ARCMIN_PER_RAD,
+                                     radial_clearance_min=self.radial_clearance_min_mm, positions=positions,
+                                     rotation=self.rotation, throw=throw)
+
+
+def modification_summary(drive: CycloidPin, spec: ModificationSpec, sol: ModificationSolution) -> dict:
+    """The summary entry ``optimised_modification``: constraints, best, initial and every start."""
+    R = float(drive.pin_circle_radius)
+
+    def row(end, s, results=(), steps=()):
+        r = {"shift_mm": end[0], "equidistant_mm": end[1], "wheel_pin_circle_radius_mm": R + end[0],
+             "wheel_pin_radius_mm": float(drive.pin_radius) + end[1],
+             "loaded_pairs_min": s.loaded_pairs_min, "loaded_pairs_mean": s.loaded_pairs_mean,
+             "lost_motion_max_arcmin": s.lost_motion_max * ARCMIN_PER_RAD, "lost_motion_min_arcmin": s.lost_motion_min * ARCMIN_PER_RAD,
+             "radial_clearance_mm": s.radial_clearance, "feasible": s.feasible}
+        if len(end) > 2:
+            r["rotation_arcsec"] = end[2] / R * ARCSEC_PER_RAD
+        if results:
+            r["solver_results"] = list(results)
+            r["solver_steps"] = list(steps)
+        return r
+
+    m = sol.modification
+    best_end = [float(m.shift), float(m.equidistant)] + ([float(m.rotation) * R] if spec.rotation else [])
+    return {"constraints": spec.constraints(), "best": row(best_end, sol), "initial": row(list(sol.initial.end), sol.initial),
+            "starts": [row(list(s.end), s, s.results, s.steps) | {"start": list(s.start)} for s in sol.starts],
+            "result": result_name(sol.result)}
+
+
+def modification_report(drive: CycloidPin, entry: dict) -> list[str]:
+    """The report section of ``optimised_modification`` (Markdown lines)."""
+    c = entry["constraints"]
+    L = ["", "## Optimised modification", "",
+         f"Maximise the loaded pairs (budget {drive.analysis.budget_mm:g} mm) with the lost motion in "
+         f"[{c['lost_motion_min_arcmin']:g}′, {c['lost_motion_max_arcmin']:g}′] and a radial clearance ≥ {c['radial_clearance_min_mm']:g} mm, "
+         f"for the reducer analysed; exact counts over the revolution ({c['positions_per_pitch']} positions per pitch).", "",
+         "| | R_Z (mm) | r_Z (mm) | loaded pairs mean (min) | lost motion (′) | radial clearance (mm) | feasible |",
+         "|---|---|---|---|---|---|---|"]
+    for label, r in (("as designed", entry["initial"]), ("optimised", entry["best"])):
+        L.append(f"| {label} | {r['wheel_pin_circle_radius_mm']:.4f} | {r['wheel_pin_radius_mm']:.4f} | {r['loaded_pairs_mean']:.2f} "
+                 f"({r['loaded_pairs_min']}) | {r['lost_motion_min_arcmin']:.2f} … {r['lost_motion_max_arcmin']:.2f} | "
+                 f"{r['radial_clearance_mm']:.4f} | {'yes' if r['feasible'] else 'no'} |")
+    if entry["result"] != "successful":
+        L += ["", "No start met the constraints: the best infeasible one is shown (loosen the spec)."]
+    return [*L, ""]
+
+
+__all__ = ("ModificationSolution", "ModificationSpec", "ModificationStart", "modification_report", "modification_summary",
+           "optimise_modification")

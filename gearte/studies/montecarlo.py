@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from typing import Callable
+from typing import Any, Callable
 
 import equinox as eqx
 import jax
@@ -123,9 +123,9 @@ def default_block_size(bytes_per_sample: int, *, budget_bytes: int = 128 * 2**20
 
 
 class MonteCarloResult(eqx.Module):
-    """Per-sample values (rad) of a Monte Carlo study, with how they were drawn."""
+    """Per-sample values (rad for angles) of a Monte Carlo study, with how they were drawn."""
 
-    values: np.ndarray
+    values: Any
     n_samples: int = eqx.field(static=True)
     chunk_size: int = eqx.field(static=True)
     block_size: int = eqx.field(static=True)
@@ -158,7 +158,8 @@ def monte_carlo(
       change them in the last bit.
     - `progress`: show a progress bar on stderr (default: when stderr is a terminal).
 
-    **Returns:** a `MonteCarloResult` with the values as a NumPy array.
+    **Returns:** a `MonteCarloResult` with the values as a NumPy array (a pytree of them when `fn`
+    returns a pytree).
     """
     require_x64()
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
@@ -191,9 +192,10 @@ def monte_carlo(
             out = _run_chunk(fn, key, jnp.asarray(start, dtype=jnp.uint32), blocks_per_call, block)
             parts.append(out)
             if progress:
-                out.block_until_ready()
+                jax.block_until_ready(out)
                 bar.update(min(chunk, n_samples - start))
-    values = np.concatenate([np.asarray(p) for p in parts])[:n_samples]
+    # One array, or a pytree of them when `fn` returns several outputs per sample.
+    values = jax.tree.map(lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:n_samples], *parts)
     return MonteCarloResult(values=values, n_samples=int(n_samples), chunk_size=chunk, block_size=block,
                             seconds=time.perf_counter() - t0)
 

@@ -162,7 +162,7 @@ def gradient_rows(sensitivity: PathwiseSensitivity, model: ErrorModel) -> list[G
 def _metric_unit(metric: AbstractMetric, unit: str) -> tuple[str, float]:
     if metric.quantity != "angle":
         return "pairs", 1.0
-    u = getattr(metric, "report_unit", None) or unit
+    u = metric.report_unit or unit
     return u, float(angle_from_rad(1.0, u))
 
 

@@ -1,0 +1,31 @@
+"""``[modification]``: choose the profile modification of a cycloid-pin disc for the reference reducer
+(Yao & Liang 2001; `gearte.optimise_modification`)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ..core.schema import Table
+from ..optimise.modification import ModificationSpec, modification_report, modification_summary
+from .kind_base import AbstractStudyKind, KindOutcome
+
+if TYPE_CHECKING:
+    from .config import Study
+
+
+class Modification(AbstractStudyKind):
+    """Profile-modification optimiser of a cycloid-pin reducer (`gearte.optimise.modification`)."""
+
+    table = "modification"
+
+    def read(self, t: Table, study: "Study") -> ModificationSpec:
+        return ModificationSpec.from_table(t, study.drive)
+
+    def run(self, study: "Study", spec: ModificationSpec, *, progress: bool | None) -> KindOutcome:
+        del progress
+        drive = study.drive
+        # An infeasible spec is reported (the best start, marked infeasible), not raised.
+        sol = spec.solve(drive, throw=False)  # pyright: ignore[reportArgumentType]
+        entry = modification_summary(drive, spec, sol)  # pyright: ignore[reportArgumentType]
+        return KindOutcome(study=study, key="optimised_modification", summary=entry,
+                           report=lambda s: modification_report(drive, s["optimised_modification"]))  # pyright: ignore[reportArgumentType]

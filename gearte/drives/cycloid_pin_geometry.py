@@ -1,0 +1,317 @@
+"""Cycloid-pin reducer: the disc geometry, its profile modification and the errors of one reducer.
+
+The model and its conventions are set out in `gearte.drives.cycloid_pin` (Yao & Liang 2001).
+This module holds what the clearance analysis (`cycloid_pin_contact`) builds on: the
+modification of the dressed wheel (`CycloidModification`), the errors of one reducer
+(`CycloidErrors`), and the tooth flanks they give (`tooth_profile`).
+
+Units: geometry in mm, errors in µm, angles in rad.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from ..core.units import MM_PER_UM, TWO_PI
+from ..core.validate import as_float
+
+if TYPE_CHECKING:
+    from .cycloid_pin import CycloidPin
+
+UM = MM_PER_UM  # mm per µm
+
+
+def _number(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
+    return as_float(name, value, positive=positive, nonnegative=nonnegative, hint="a radius or length cannot be zero or negative" if positive else "")
+
+
+def min_curvature_radius(pin_circle_radius: float, eccentricity: float, z_pins: int, *, points: int = 20001) -> float:
+    """Smallest radius of curvature (mm) of the convex part of the theoretical (pin-centre) curve.
+
+    The equidistant E = P − r N is free of loops (undercut) exactly when r is below this
+    radius: E′ = |P′| (1 + r κ) T, with κ the signed curvature (negative where the curve
+    is convex, towards the tooth tips).
+
+    **Arguments:**
+
+    - `pin_circle_radius`: R (mm); `eccentricity`: a (mm); `z_pins`: z_b.
+    """
+    R, a, zb = float(pin_circle_radius), float(eccentricity), int(z_pins)
+    za = zb - 1
+    K = a * zb / R
+    phi = np.linspace(0.0, math.pi, points)
+    u, v = phi / za, zb * phi / za
+    dx = (R / za) * (np.cos(u) - K * np.cos(v))
+    dy = (R / za) * (-np.sin(u) + K * np.sin(v))
+    ddx = (R / za**2) * (-np.sin(u) + K * zb * np.sin(v))
+    ddy = (R / za**2) * (-np.cos(u) + K * zb * np.cos(v))
+    kappa = (dx * ddy - dy * ddx) / np.hypot(dx, dy) ** 3
+    convex = kappa < 0
+    if not np.any(convex):
+        return math.inf
+    return float(1.0 / np.max(-kappa[convex]))
+
+
+# ---------------------------------------------------------------- models
+
+
+class CycloidModification(eqx.Module):
+    """Profile modification of the cycloid disc (the dressed grinding wheel).
+
+    **Arguments:**
+
+    - `shift`: ΔR_Z = R_Z − R_z, mm (negative: "negative shift", more clearance).
+    - `equidistant`: Δr_Z = r_Z − r_z, mm (positive: "positive equidistant", more clearance).
+    - `rotation`: δ, rad ≥ 0 for clearance: each flank half turned away from its pins
+      by δ (gearte's rotation modification; 0 for Yao & Liang's profiles).
+    """
+
+    shift: Float[Array, ""]
+    equidistant: Float[Array, ""]
+    rotation: Float[Array, ""]
+
+    def __init__(self, shift: ArrayLike = 0.0, equidistant: ArrayLike = 0.0, rotation: ArrayLike = 0.0):
+        self.shift = jnp.asarray(shift, dtype=float)
+        self.equidistant = jnp.asarray(equidistant, dtype=float)
+        self.rotation = jnp.asarray(rotation, dtype=float)
+
+
+def check_modification(drive: CycloidPin) -> None:
+    """Raise `ValueError` if the dressed wheel gives an impossible or undercut profile (Python floats; before jit)."""
+    R, a, zb = float(drive.pin_circle_radius), float(drive.eccentricity), drive.z_pins
+    RZ = float(drive.wheel_pin_circle_radius)
+    rZ = float(drive.wheel_pin_radius)
+    rot = float(drive.modification.rotation)
+    for name, v in (("modification.shift", RZ - R), ("modification.equidistant", rZ - float(drive.pin_radius)), ("modification.rotation", rot)):
+        if not math.isfinite(v):
+            raise ValueError(f"{name}: must be finite, got {v}")
+    if not RZ > 0:
+        raise ValueError(f"modification.shift: the wheel's pin-circle radius R_Z = {RZ:g} mm must be > 0")
+    if not rZ > 0:
+        raise ValueError(f"modification.equidistant: the wheel's pin radius r_Z = {rZ:g} mm must be > 0")
+    KZ = a * zb / RZ
+    if not KZ < 1.0:
+        raise ValueError(f"modification.shift: with R_Z = {RZ:g} mm the wheel's K = a z_b / R_Z = {KZ:.6g} is ≥ 1; "
+                         "use a smaller negative shift")
+    rho = min_curvature_radius(RZ, a, zb)
+    if not rZ < rho:
+        raise ValueError(f"modification.equidistant: the wheel's pin radius r_Z = {rZ:g} mm is not below the smallest "
+                         f"radius of curvature of its theoretical profile, {rho:.6g} mm: the ground profile would be "
+                         "undercut (looped); reduce the equidistant modification")
+    if abs(rot) >= math.pi / (2 * (zb - 1)):
+        raise ValueError(f"modification.rotation: {rot:g} rad is not a small rotation; it must be below a quarter of a "
+                         f"tooth space, π/(2 z_a) = {math.pi / (2 * (zb - 1)):.6g} rad")
+
+
+class CycloidErrors(eqx.Module):
+    """The errors of one reducer: its disc's form-grinding errors and its own (Yao & Liang 2001, eqs. 1–3).
+
+    Lengths in µm, angles in rad. Per-space fields take a scalar (the same for every
+    space) or z_a values (space n = 0 … z_a − 1, the paper's n + 1); per-pin fields a scalar
+    or z_b values. Every field defaults to 0.
+
+    **Form grinding (Yao & Liang 2001, eqs. 1–2):**
+
+    - `dressing_x`, `dressing_y`: δX_4, δY_4, the dresser's errors, µm.
+    - `infeed`: ΔY_4(n), infeed error of each tooth space, µm (positive: less cut).
+    - `index_offset`: β_0, the initial index angle, rad.
+    - `indexing`: Δβ(n), the grinder's indexing error of each space, rad.
+    - `setup_eccentricity`, `setup_phase`: ΔA (µm) at φ (rad), blank set-up eccentricity.
+    - `mandrel_runout`, `mandrel_phase`: ΔB (µm) at its angle (rad; 0 as in eq. 2).
+
+    **Reducer (Yao & Liang 2001, sec. 2):**
+
+    - `pin_circle_radius`: R′_z − R_z, µm.
+    - `pin_radius`: r′_z − r_z, µm (sleeve contact surface from the pin centre, fits included).
+    - `eccentricity`: A′ − a, µm.
+    - `pin_tangential`: δ_j, tangential position error of each pin, µm (positive: CCW).
+    - `pin_radial`: radial position error of each pin, µm (positive: outwards).
+    - `disc_offset`, `disc_offset_phase`: Δ_1 (µm) at α_1 (rad), disc centre from the eccentric.
+    - `pin_wheel_offset`, `pin_wheel_offset_phase`: Δ_2 (µm) at α_2 (rad), pin-wheel centre
+      from the input axis, fixed in the converted mechanism (the paper's eq. 3).
+    - `pin_circle_eccentricity`, `pin_circle_eccentricity_phase`: (µm) at α_e (rad), a
+      pin-circle eccentricity fixed in the housing: at α_e + θ_T in the converted frame.
+    """
+
+    dressing_x: Float[Array, ""]
+    dressing_y: Float[Array, ""]
+    infeed: Float[Array, "*za"]
+    index_offset: Float[Array, ""]
+    indexing: Float[Array, "*za"]
+    setup_eccentricity: Float[Array, ""]
+    setup_phase: Float[Array, ""]
+    mandrel_runout: Float[Array, ""]
+    mandrel_phase: Float[Array, ""]
+    pin_circle_radius: Float[Array, ""]
+    pin_radius: Float[Array, ""]
+    eccentricity: Float[Array, ""]
+    pin_tangential: Float[Array, "*zb"]
+    pin_radial: Float[Array, "*zb"]
+    disc_offset: Float[Array, ""]
+    disc_offset_phase: Float[Array, ""]
+    pin_wheel_offset: Float[Array, ""]
+    pin_wheel_offset_phase: Float[Array, ""]
+    pin_circle_eccentricity: Float[Array, ""]
+    pin_circle_eccentricity_phase: Float[Array, ""]
+
+    def __init__(self, *, dressing_x: ArrayLike = 0.0, dressing_y: ArrayLike = 0.0, infeed: ArrayLike = 0.0,
+                 index_offset: ArrayLike = 0.0, indexing: ArrayLike = 0.0, setup_eccentricity: ArrayLike = 0.0,
+                 setup_phase: ArrayLike = 0.0, mandrel_runout: ArrayLike = 0.0, mandrel_phase: ArrayLike = 0.0,
+                 pin_circle_radius: ArrayLike = 0.0, pin_radius: ArrayLike = 0.0, eccentricity: ArrayLike = 0.0,
+                 pin_tangential: ArrayLike = 0.0, pin_radial: ArrayLike = 0.0, disc_offset: ArrayLike = 0.0,
+                 disc_offset_phase: ArrayLike = 0.0, pin_wheel_offset: ArrayLike = 0.0,
+                 pin_wheel_offset_phase: ArrayLike = 0.0, pin_circle_eccentricity: ArrayLike = 0.0,
+                 pin_circle_eccentricity_phase: ArrayLike = 0.0):
+        f = lambda x: jnp.asarray(x, dtype=float)
+        self.dressing_x, self.dressing_y, self.infeed = f(dressing_x), f(dressing_y), f(infeed)
+        self.index_offset, self.indexing = f(index_offset), f(indexing)
+        self.setup_eccentricity, self.setup_phase = f(setup_eccentricity), f(setup_phase)
+        self.mandrel_runout, self.mandrel_phase = f(mandrel_runout), f(mandrel_phase)
+        self.pin_circle_radius, self.pin_radius, self.eccentricity = f(pin_circle_radius), f(pin_radius), f(eccentricity)
+        self.pin_tangential, self.pin_radial = f(pin_tangential), f(pin_radial)
+        self.disc_offset, self.disc_offset_phase = f(disc_offset), f(disc_offset_phase)
+        self.pin_wheel_offset, self.pin_wheel_offset_phase = f(pin_wheel_offset), f(pin_wheel_offset_phase)
+        self.pin_circle_eccentricity = f(pin_circle_eccentricity)
+        self.pin_circle_eccentricity_phase = f(pin_circle_eccentricity_phase)
+
+
+#: Fields of `CycloidErrors` with one value per tooth space / per pin.
+PER_SPACE = ("infeed", "indexing")
+PER_PIN = ("pin_tangential", "pin_radial")
+ERROR_FIELDS = tuple(f.name for f in dataclasses.fields(CycloidErrors))
+#: Unit of each error field, for reports.
+ERROR_UNITS = {name: ("rad" if name in ("index_offset", "indexing") or name.endswith("_phase") else "µm") for name in ERROR_FIELDS}
+
+
+def as_cycloid_errors(errors: CycloidErrors | Mapping[str, Any] | None) -> CycloidErrors:
+    """`errors` as a `CycloidErrors`: None is no error; a mapping names fields (µm or rad), the others are 0.
+
+    A mapping is what the drive protocol passes (``CycloidPin.response``): source name → value.
+    """
+    if errors is None:
+        return CycloidErrors()
+    if isinstance(errors, CycloidErrors):
+        return errors
+    if isinstance(errors, Mapping):
+        unknown = sorted(set(errors) - set(ERROR_FIELDS))
+        if unknown:
+            raise ValueError(f"errors: unknown error field(s) {unknown}; the fields are {list(ERROR_FIELDS)}")
+        return CycloidErrors(**dict(errors))
+    raise ValueError(f"errors: expected a CycloidErrors or a mapping of error fields, got {type(errors).__name__}")
+
+
+def checked_errors(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] | None) -> CycloidErrors:
+    """`errors` with per-space and per-pin fields broadcast to z_a and z_b values; shapes checked (trace time).
+
+    `errors`: a `CycloidErrors`, a mapping of field names to values (the others 0), or None (no error).
+    """
+    errors = as_cycloid_errors(errors)
+    out = {}
+    for name in ERROR_FIELDS:
+        v = jnp.asarray(getattr(errors, name))
+        if name in PER_SPACE or name in PER_PIN:
+            n = drive.z_lobes if name in PER_SPACE else drive.z_pins
+            what = "tooth space (z_a)" if name in PER_SPACE else "pin (z_b)"
+            if v.shape not in ((), (1,), (n,)):
+                raise ValueError(f"errors.{name}: give a scalar or one value per {what} = {n} values, got shape {v.shape}")
+            v = jnp.broadcast_to(v.reshape(-1) if v.ndim else v, (n,))
+        elif v.shape != ():
+            raise ValueError(f"errors.{name}: must be a scalar, got shape {v.shape}")
+        out[name] = v
+    return CycloidErrors(**out)
+
+
+# ---------------------------------------------------------------- geometry (jit/vmap friendly)
+
+
+def _rot(x, y, angle):
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    return c * x - s * y, s * x + c * y
+
+
+def _wheel_curve(R, a, za: int, zb: int, phi, d):
+    """P(φ) − d N(φ) for a wheel with pin circle R and eccentricity a (see the module notes)."""
+    u = phi / float(za)
+    v = phi * (float(zb) / float(za))
+    K = a * float(zb) / R
+    su, cu, sv, cv = jnp.sin(u), jnp.cos(u), jnp.sin(v), jnp.cos(v)
+    S = jnp.sqrt(1.0 + K * K - 2.0 * K * jnp.cos(phi))
+    x = R * su - a * sv - d * (su - K * sv) / S
+    y = R * cu - a * cv - d * (cu - K * cv) / S
+    return x, y
+
+
+def theoretical_profile(drive: CycloidPin, phi: ArrayLike, *, wheel: bool = False) -> Float[Array, "... 2"]:
+    """Theoretical (pin-centre) curve P(φ), mm, in the disc frame (tooth space 0).
+
+    With `wheel=True` the curve of the dressed wheel (R_Z, same a).
+    """
+    R = drive.wheel_pin_circle_radius if wheel else drive.pin_circle_radius
+    x, y = _wheel_curve(R, drive.eccentricity, drive.z_lobes, drive.z_pins, jnp.asarray(phi, dtype=float), 0.0)
+    return jnp.stack([x, y], axis=-1)
+
+
+class _Placement(eqx.Module):
+    """Rigid placement of one tooth-space half in the disc frame: the rotation modification, the wheel
+    offsets (δX_4, δY_4 + ΔY_4(n)), the index rotation −β_n and the bore eccentricity (Yao & Liang 2001, eqs. 1–2)."""
+
+    cos_mod: Array
+    sin_mod: Array
+    dx: Array
+    dy: Array
+    cos_beta: Array
+    sin_beta: Array
+    ex: Array
+    ey: Array
+
+
+def _placement(drive: CycloidPin, err: CycloidErrors, n, side) -> _Placement:
+    m = drive.modification
+    beta = jnp.asarray(n).astype(float) * (TWO_PI / drive.z_lobes) + err.index_offset + err.indexing[n]
+    ex = err.setup_eccentricity * jnp.cos(err.setup_phase) + err.mandrel_runout * jnp.cos(err.mandrel_phase)
+    ey = err.setup_eccentricity * jnp.sin(err.setup_phase) + err.mandrel_runout * jnp.sin(err.mandrel_phase)
+    return _Placement(jnp.cos(side * m.rotation), -jnp.sin(side * m.rotation), err.dressing_x * UM,
+                      (err.dressing_y + err.infeed[n]) * UM, jnp.cos(beta), -jnp.sin(beta), ex * UM, ey * UM)
+
+
+def _placed_curve(drive: CycloidPin, pl: _Placement, phi, d):
+    """Tooth-space half placed by `pl`: the wheel's P_Z − d N_Z in the disc frame centred on the bore, mm.
+    d = r_Z: the flank; d = r_Z − r′: the pin-centre locus."""
+    x, y = _wheel_curve(drive.wheel_pin_circle_radius, drive.eccentricity, drive.z_lobes, drive.z_pins, phi, d)
+    x, y = pl.cos_mod * x - pl.sin_mod * y, pl.sin_mod * x + pl.cos_mod * y
+    x, y = x + pl.dx, y + pl.dy
+    x, y = pl.cos_beta * x - pl.sin_beta * y, pl.sin_beta * x + pl.cos_beta * y
+    return x - pl.ex, y - pl.ey
+
+
+def _space_curve(drive: CycloidPin, err: CycloidErrors, n, side, phi, d):
+    """Tooth space n, half `side` (±1): see `_placed_curve`."""
+    return _placed_curve(drive, _placement(drive, err, n, side), phi, d)
+
+
+def tooth_profile(drive: CycloidPin, phi: ArrayLike, *, errors: CycloidErrors | Mapping[str, Any] | None = None, space: int = 0) -> Float[Array, "... 2"]:
+    """Points of the actual flank of tooth space `space` (mm, disc frame centred on the bore).
+
+    `phi` ∈ [−π, π] is the flank parameter (φ > 0: driving half, φ < 0: reverse half).
+    """
+    err = checked_errors(drive, errors)
+    phi = jnp.asarray(phi, dtype=float)
+    side = jnp.where(phi >= 0, 1.0, -1.0)
+    x, y = _space_curve(drive, err, jnp.asarray(space % drive.z_lobes), side, phi, drive.wheel_pin_radius)
+    return jnp.stack([x, y], axis=-1)
+
+
+def disc_outline(drive: CycloidPin, *, errors: CycloidErrors | Mapping[str, Any] | None = None, points_per_space: int = 200) -> Float[Array, "m 2"]:
+    """The whole actual disc outline (mm), all z_a tooth spaces in order, for plotting."""
+    phi = jnp.linspace(-math.pi, math.pi, points_per_space)
+    pts = [tooth_profile(drive, phi, errors=errors, space=n) for n in range(drive.z_lobes)]
+    return jnp.concatenate(pts, axis=0)
+
