@@ -1,12 +1,12 @@
 """Benchmark: the random-assembly Monte Carlo study of the 2K-H planetary example, gearte against plain NumPy.
 
-The study is `examples/planetary_wang2013_random.toml` (seed 000, Fig. 2): Table 1 magnitudes, every
+The study is `examples/planetary_wang2013_random.toml` (Wang et al. 2013, Fig. 2): Table 1 magnitudes, every
 phase uniform, single-path model, peak |Δθ| over the 24-input-revolution hyper-period. Measured in one run:
 
-1. gearte, `monte_carlo(TEStudy(...), n_samples=50,000)`: first call (compilation + run) and steady state
-   (best of repeats); compilation = first call − steady state.
+1. gearte, `gearte.monte_carlo(gearte.TEStudy(drive, errors, metric=gearte.Peak()), n_samples=50,000)`: first
+   call (compilation + run) and steady state (best of repeats); compilation = first call − steady state.
 2. A plain NumPy baseline with the same physics: phases drawn with `numpy.random`, the nine sinusoidal
-   terms of the seed's eq. (9) (planet terms at the physical 7/24 ω_s) evaluated on a dense grid over the
+   terms of eq. (9) of Wang et al. (2013) (planet terms at the physical 7/24 ω_s) evaluated on a dense grid over the
    hyper-period, max |TE| per sample, vectorised over blocks of samples. Two ways of writing it:
    "direct" (one `np.sin` per term and grid point) and "tabulated" (sin/cos of every term's frequency on
    the grid computed once; per sample only the coefficients change, a matrix product gives the TE).
@@ -49,7 +49,8 @@ ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi
 
 # ----------------------------------------------------------------------------- plain NumPy baseline
 #
-# Seed 000, eq. (9), with the planet terms at the physical 7/24 ω_s (see spec planetary_2kh.md):
+# Wang et al. (2013), eq. (9), with the planet terms at the physical 7/24 ω_s (the paper prints 11/24; see
+# notebooks/planetary_wang2013.ipynb for the erratum):
 #   Δθ_sc = −1/(48000 cos(π/9)) Σ_k M_k sin(f_k θ + s_k φ_k + c_k)   (rad; θ = input angle)
 # Error sources, in this order: E_s, E_p, E_r (manufacturing; phases β_s, β_p, β_r) and
 # A_s, A_p, A_c (assembly; phases γ_s, γ_p, γ_c). Magnitudes in µm.
@@ -187,7 +188,7 @@ def machine_info() -> dict:
     try:
         blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
         blas = f"{blas.get('name')} {blas.get('version')}"
-    except Exception:  # noqa: BLE001 - informational only
+    except Exception:  # informational only
         blas = "unknown"
     commit = "unknown"
     try:  # read-only: which version of gearte was measured
@@ -204,7 +205,7 @@ def machine_info() -> dict:
         "platform": platform.platform(), "python": platform.python_version(),
         "gearte": gearte.__version__, "gearte_commit": commit, "jax": jax.__version__, "jaxlib": jaxlib.__version__,
         "jax_backend": jax.default_backend(), "equinox": equinox.__version__, "numpy": np.__version__, "numpy_blas": blas,
-        "date_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "date_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
     }
 
 
@@ -234,9 +235,13 @@ def main(argv=None) -> int:
 
     import jax
 
+    # gearte computes in float64 (exact peaks to 1e-6 relative and better); importing gearte changes no global
+    # state, so JAX's 64-bit mode is switched on here, before gearte is imported and any array is made.
+    jax.config.update("jax_enable_x64", True)
+
     import gearte
-    from gearte._config import load_study
-    from gearte._montecarlo import as_key, sample_keys
+    from gearte.cli.config import load_study
+    from gearte.studies.montecarlo import as_key, sample_keys
 
     info = machine_info()
     busy0, own0, wall0 = _busy_cpu_seconds(), _own_cpu_seconds(), time.perf_counter()
@@ -244,7 +249,7 @@ def main(argv=None) -> int:
 
     # 1. gearte: compile + run, then steady state.
     study = load_study(CONFIG)
-    ts = gearte.TEStudy(study.drive, study.errors, metric="peak")
+    ts = gearte.TEStudy(study.drive, study.errors, metric=gearte.Peak())
     n = args.samples
     t0 = time.perf_counter()
     first = gearte.monte_carlo(ts, key=study.seed, n_samples=n, progress=False)
@@ -329,12 +334,13 @@ def main(argv=None) -> int:
         rng = np.random.default_rng(12345)
         if variant == "direct":
             t_setup = 0.0
-            best, all_t = best_of(lambda: baseline_direct(rng, size, p), args.baseline_repeats)
+            best, all_t = best_of(lambda rng=rng, size=size, p=p: baseline_direct(rng, size, p), args.baseline_repeats)
         else:
             t0 = time.perf_counter()
             sin_t, cos_t = tables(grid(p))
             t_setup = time.perf_counter() - t0
-            best, all_t = best_of(lambda: baseline_tabulated(rng, size, sin_t, cos_t), args.baseline_repeats)
+            best, all_t = best_of(lambda rng=rng, size=size, sin_t=sin_t, cos_t=cos_t: baseline_tabulated(rng, size, sin_t, cos_t),
+                                  args.baseline_repeats)
         row = {"variant": variant, "points_per_rev": p, "max_rel_error": acc[p]["max_rel_error"] if p in acc else None,
                "subset_samples": size, "seconds_best": best, "seconds_all": all_t, "setup_seconds_excluded": t_setup,
                "per_sample_s": best / size}
@@ -416,9 +422,9 @@ def ratio(x: float) -> str:
 def report(r: dict) -> str:
     m, g, a, e = r["machine"], r["gearte"], r["accuracy"], r["end_to_end"]
     chosen = a["equal_accuracy_points_per_rev"]
-    yes = lambda ok: "met" if ok else "**not met**"  # noqa: E731
+    yes = lambda ok: "met" if ok else "**not met**"
     L = ["# Benchmark: planetary Monte Carlo (random-assembly study)", "",
-         f"Study `{r['study']}` (seed 000, Fig. 2): Table 1 magnitudes, all phases uniform, single-path 2K-H model, "
+         f"Study `{r['study']}` (Wang et al. 2013, Fig. 2): Table 1 magnitudes, all phases uniform, single-path 2K-H model, "
          "peak |Δθ| over the 24-input-revolution hyper-period.", "",
          "## Machine", "",
          "| | |", "|---|---|",
@@ -459,7 +465,7 @@ def report(r: dict) -> str:
     for d in a["densities"]:
         L.append(f"| {d['points_per_rev']:,} | {d['grid_points']:,} | {d['max_rel_error']:.2e} | {d['median_rel_error']:.2e} |")
     L += ["",
-          f"- The baseline's nine terms (seed eq. (9), planet terms at 7/24) equal gearte's model terms: largest relative TE "
+          f"- The baseline's nine terms (eq. (9) of Wang et al. 2013, planet terms at 7/24) equal gearte's model terms: largest relative TE "
           f"difference {a['physics_check_max_rel_diff']:.1e} on 64 samples.",
           f"- The direct formulation at {chosen:,} points/rev has max relative error {a['direct_formulation_max_rel_error_on_subset']:.1e} "
           "on its timing subset (the same grid as the tabulated one).",
