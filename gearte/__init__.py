@@ -57,6 +57,8 @@ from .drives import (
     Eccentricity as Eccentricity,
     ExplicitDrive as ExplicitDrive,
     ExplicitTerm as ExplicitTerm,
+    HarmonicDrive as HarmonicDrive,
+    HarmonicSource as HarmonicSource,
     Planetary2KH as Planetary2KH,
     SourceSpec as SourceSpec,
 )

@@ -237,8 +237,9 @@ def _tolerance(t: Table, spec: SourceSpec) -> float | None:
     if tol is None:
         return declared
     if declared is not None and tol != declared:
-        raise ConfigError(f"{t.where} tolerance: {tol:g}, but the drive declares {declared:g} for this source; give it in one place "
-                          "(or make them agree)")
+        u = "µm" if spec.unit == "µm" else "rad"
+        raise ConfigError(f"{t.where} tolerance: {tol:g} {u}, but the drive declares {declared:g} {u} for this source; give it in "
+                          "one place (or make them agree)")
     return tol
 
 

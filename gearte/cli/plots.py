@@ -180,24 +180,6 @@ def labelled_spectrum(freq_cpm, amplitude, lines, *, unit: str, title: str, path
     fig.savefig(path)
 
 
-def histogram_vs_estimate(values, stats, *, estimates, unit: str, metric: str, title: str, path, bins: int = 80):
-    """Monte Carlo histogram with vertical lines for design estimates; `estimates` = [(value, label)]."""
-    sym = UNIT_SYMBOLS[unit]
-    fig = Figure(figsize=(9, 4.8), dpi=110)
-    ax = fig.subplots()
-    ax.hist(values, bins=bins, color="#4477aa", alpha=0.85, edgecolor="white", linewidth=0.3)
-    for p, style in (("50", "--"), ("99.73", "-.")):
-        ax.axvline(stats.percentiles[p], color="#222222", linestyle=style, linewidth=1.0, label=f"Monte Carlo P{p} = {stats.percentiles[p]:.2f}{sym}")
-    for (v, label), c in zip(estimates, ["#cc3311", "#ee7733", "#aa3377"]):
-        ax.axvline(v, color=c, linewidth=1.6, label=label)
-    ax.set_xlabel(f"{_METRIC_LABEL.get(metric, metric)} ({sym})")
-    ax.set_ylabel("units")
-    ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=8, loc="upper right")
-    fig.tight_layout()
-    fig.savefig(path)
-
-
 def histogram_with_estimates(values, *, percentiles, estimates, unit: str, metric: str, title: str, path, bins: int = 80):
     """Monte Carlo histogram with its median and P99.73 and vertical lines for design estimates.
 

@@ -1,6 +1,6 @@
 """Drive models: the protocol every drive implements, one file per drive, and the registry."""
 
-from . import cycloid_pin as cycloid_pin, wang2013 as wang2013
+from . import cycloid_pin as cycloid_pin, harmonic as harmonic, wang2013 as wang2013
 from .cycloid_pin import (
     Clearances as Clearances,
     CycloidAnalysis as CycloidAnalysis,
@@ -14,6 +14,7 @@ from .cycloid_pin import (
     RotationErrorPeakToPeak as RotationErrorPeakToPeak,
 )
 from .explicit import ExplicitDrive as ExplicitDrive, ExplicitTerm as ExplicitTerm
+from .harmonic import HarmonicDrive as HarmonicDrive, HarmonicRunSettings as HarmonicRunSettings, HarmonicSource as HarmonicSource
 from .planetary_2kh import Planetary2KH as Planetary2KH, member_speeds as member_speeds
 from .protocol import (
     AbstractDrive as AbstractDrive,

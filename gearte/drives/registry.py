@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from .cycloid_pin import CycloidPin
 from .explicit import ExplicitDrive
+from .harmonic import HarmonicDrive
 from .planetary_2kh import Planetary2KH
 from .protocol import AbstractDrive
 
@@ -12,6 +13,7 @@ DRIVES: dict[str, type[AbstractDrive]] = {
     for cls in (
         Planetary2KH,
         ExplicitDrive,
+        HarmonicDrive,
         CycloidPin,
     )
 }

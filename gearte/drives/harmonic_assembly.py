@@ -1,0 +1,198 @@
+"""Harmonic drive: choose the assembly phases of one unit whose errors are known (measured parts).
+
+Sources of one class share a frequency and can be turned against each other at assembly
+(e.g. the CS mounting orientation against the flexible-bearing run-out); the CS and FS
+classes differ by 2ω_o, so their relative phase turns through 2π every half output
+revolution (the beat, Liu sec. 3) and no choice cancels them for all time.
+
+The optimiser works on this one drive's own model (optimistix's BFGS on a smooth surrogate,
+exact re-evaluation), not on an error model, so it lives beside the drive and is used by
+its `study_outputs`; it returns a solution with a `gearte.RESULTS` code, as every gearte solve.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from ..core.extrema import _basis, _grid_values, grid_size
+from ..core.precision import require_x64
+from ..core.signal import Components, to_signal
+from ..core.solution import RESULTS, check
+from .harmonic_estimate import class_phasors
+from .harmonic_sources import CLASSES
+from .protocol import Eccentricity
+
+if TYPE_CHECKING:
+    from .harmonic import HarmonicDrive
+
+
+class AssemblyResult(eqx.Module):
+    """Assembly phases chosen for one unit (`optimise_assembly`).
+
+    **Fields:**
+
+    - `errors`: the unit's errors with the adjusted phases.
+    - `turns`: change of each adjustable source's angle Θ, rad (in (−π, π]).
+    - `before`, `after`: peak-to-peak TE over one output revolution, rad.
+    - `class_before`, `class_after`: |resultant| of each class, rad.
+    - `class_least`: the least |resultant| each class can reach by turning its adjustable
+      sources (closed form: a polygon closes only if no side exceeds the sum of the others).
+    - `result`: the solve's `gearte.RESULTS` code: that of the best start, or
+      `some_starts_failed` when it succeeded but other starts did not converge.
+    - `starts`, `converged`: optimiser runs (random starts + the unit as assembled) and how
+      many of them reported success.
+    """
+
+    errors: dict[str, Eccentricity]
+    turns: dict[str, float]
+    before: float
+    after: float
+    class_before: dict[str, float]
+    class_after: dict[str, float]
+    class_least: dict[str, float]
+    result: RESULTS
+    starts: int = eqx.field(static=True)
+    converged: int = eqx.field(static=True)
+
+
+def _least_resultant(fixed: complex, adjustable: Sequence[float]) -> float:
+    sides = [abs(fixed)] + [abs(a) for a in adjustable]
+    return max(0.0, 2.0 * max(sides) - sum(sides))
+
+
+def _starts_result(results, best: int) -> tuple[int, Any]:
+    ok = np.asarray(results == optx.RESULTS.successful)
+    if not bool(ok[best]):
+        return int(ok.sum()), RESULTS.promote(jax.tree.map(lambda v: v[best], results))
+    return int(ok.sum()), RESULTS.successful if ok.all() else RESULTS.some_starts_failed
+
+
+def check_adjustable(drive: HarmonicDrive, adjustable: Sequence[str]) -> list[str]:
+    """The adjustable sources as a list, checked: sources of the drive, unique, none of the tooth class."""
+    names = [s.name for s in drive.sources]
+    adjustable = list(adjustable)
+    if not adjustable:
+        raise ValueError("adjustable: name at least one source whose phase can be set at assembly")
+    unknown = [a for a in adjustable if a not in names]
+    if unknown:
+        raise ValueError(f"adjustable: {unknown} are not sources of this drive; use some of {names}")
+    if len(set(adjustable)) != len(adjustable):
+        raise ValueError(f"adjustable: names repeated in {adjustable}")
+    by_name = dict(zip(names, drive.sources))
+    tooth = [a for a in adjustable if by_name[a].source_class == "tooth"]
+    if tooth:
+        raise ValueError(f"adjustable: {tooth} are tooth-to-tooth sources, whose phase is not set at assembly")
+    return adjustable
+
+
+def optimise_assembly(
+    drive: HarmonicDrive,
+    errors: Mapping[str, Eccentricity],
+    *,
+    adjustable: Sequence[str],
+    starts: int = 32,
+    key: int = 0,
+    max_steps: int = 256,
+    throw: bool = True,
+) -> AssemblyResult:
+    """Choose the phases of the `adjustable` sources at assembly to minimise the per-output-revolution peak-to-peak TE.
+
+    The CS and FS classes beat (see the module notes), so the objective is the peak-to-peak
+    over the whole hyper-period, never over a shorter stretch. It is minimised with
+    optimistix's BFGS on a smooth log-sum-exp version of it (`gearte.smooth_peak`'s idea
+    applied to max − min, on the hyper-period grid of the non-tooth classes — the tooth class
+    adds the same 2b to every assembly, see `gearte.extrema_two_scale`), from `starts` random
+    starting phases plus the unit as assembled; every result is then re-evaluated exactly
+    and the best kept (never worse than as assembled).
+
+    **Arguments:**
+
+    - `drive`: the `HarmonicDrive`.
+    - `errors`: the unit's errors (magnitudes µm, phases rad).
+    - `adjustable`: names of the sources whose angle Θ can be chosen (not tooth-class ones).
+    - `starts`: random starting points (seeded by `key`, an integer).
+    - `max_steps`: BFGS steps per start.
+    - `throw`: raise if the best start did not converge (else check `result`); a solve whose
+      best start converged but some others did not is reported as `some_starts_failed`, not raised.
+
+    **Returns:** an `AssemblyResult`.
+    """
+    require_x64()
+    adjustable = check_adjustable(drive, adjustable)
+    if isinstance(starts, bool) or not isinstance(starts, int) or starts < 1:
+        raise ValueError(f"starts: must be a whole number ≥ 1, got {starts!r}")
+    names = [s.name for s in drive.sources]
+    base = drive.checked(errors)
+    comp0 = drive.components(base)
+    keep = [i for i, s in enumerate(drive.sources) if s.source_class != "tooth"]
+    sig0 = to_signal(Components(comp0.amplitude[jnp.asarray(keep)], comp0.phase[jnp.asarray(keep)],
+                                [comp0.freq[i] for i in keep], gain=comp0.gain[jnp.asarray(keep)]))
+    m = grid_size(sig0.orders, 16)
+    cos_b, sin_b = _basis(sig0.orders, m)
+    scale = float(jnp.sum(comp0.amplitude * comp0.gain)) or 1.0
+    width = 1e-3 * scale
+    adj_idx = [names.index(a) for a in adjustable]
+
+    def errors_for(y):
+        out = dict(base)
+        for j, a in enumerate(adjustable):
+            out[a] = Eccentricity(base[a].magnitude, base[a].phase + y[j])
+        return out
+
+    def smooth_p2p(y, args):
+        del args
+        comp = drive.components(errors_for(y))
+        sig = to_signal(Components(comp.amplitude[jnp.asarray(keep)], comp.phase[jnp.asarray(keep)],
+                                   [comp.freq[i] for i in keep], gain=comp.gain[jnp.asarray(keep)]))
+        f = _grid_values(sig, cos_b, sin_b) / width
+        return width * (jax.nn.logsumexp(f) + jax.nn.logsumexp(-f))
+
+    def exact_p2p(y):
+        e = drive.extrema(drive.signal(errors_for(y)))
+        return e.max - e.min
+
+    y0 = jax.random.uniform(jax.random.key(key), (starts, len(adjustable)), minval=0.0, maxval=2 * math.pi)
+    y0 = jnp.concatenate([jnp.zeros((1, len(adjustable))), y0], axis=0)
+    solver = optx.BFGS(rtol=1e-9, atol=1e-12 * scale)
+
+    @jax.jit
+    def solve_all(y0s):
+        def one(y):
+            sol = optx.minimise(smooth_p2p, solver, y, max_steps=max_steps, throw=False)
+            return sol.value, sol.result
+        ys, results = jax.vmap(one)(y0s)
+        return ys, results, jax.vmap(exact_p2p)(ys), jax.vmap(exact_p2p)(y0s[:1])
+
+    ys, results, vals, before = solve_all(y0)
+    vals = np.asarray(vals)
+    best = int(np.argmin(vals))
+    converged, result = _starts_result(results, best)
+    before = float(before[0])
+    if vals[best] >= before:
+        y_best, after = np.zeros(len(adjustable)), before
+    else:
+        y_best, after = np.asarray(ys[best]), float(vals[best])
+    final = errors_for(jnp.asarray(y_best))
+    turns = {a: float((y_best[j] + math.pi) % (2 * math.pi) - math.pi) for j, a in enumerate(adjustable)}
+    # Closed-form least resultant per class (fixed sources as one phasor, adjustable ones free).
+    amp = np.asarray(comp0.amplitude * comp0.gain)
+    ph = np.asarray(comp0.phase)
+    least = {}
+    for c in CLASSES:
+        fixed = sum((amp[i] * np.exp(1j * ph[i]) for i, s in enumerate(drive.sources) if s.source_class == c and i not in adj_idx), 0j)
+        adj = [amp[i] for i, s in enumerate(drive.sources) if s.source_class == c and i in adj_idx]
+        least[c] = _least_resultant(fixed, adj)
+    check(result, throw=throw and not bool(result == RESULTS.some_starts_failed), what="optimise_assembly")
+    return AssemblyResult(errors=final, turns=turns, before=before, after=after,
+                          class_before={c: abs(v) for c, v in class_phasors(drive, base).items()},
+                          class_after={c: abs(v) for c, v in class_phasors(drive, final).items()},
+                          class_least=least, result=result, starts=int(y0.shape[0]), converged=converged)
+
