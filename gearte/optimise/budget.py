@@ -233,7 +233,7 @@ class _Draws(eqx.Module):
     errors: dict[str, Any]
 
 
-def _draws(p: BudgetProblem, key: PRNGKeyArray, n: int) -> _Draws:
+def common_draws(p: BudgetProblem, key: PRNGKeyArray, n: int) -> _Draws:
     errs = jax.vmap(p.model.sample)(sample_keys(key, 0, n))
     u = {}
     for k in p.names:
@@ -317,7 +317,7 @@ def _violation(p: BudgetProblem, x: Array) -> Array:
     return jnp.stack(out)
 
 
-_BRACKET = (1e-3, 1e3)
+_BRACKET = (1e-3, 1e2)  # scale of the direction e^y, which starts at the nominal tolerances
 
 
 def _scale(p: BudgetProblem, d: Mapping[str, Array], draws: _Draws) -> Array:
@@ -329,19 +329,40 @@ def _scale(p: BudgetProblem, d: Mapping[str, Array], draws: _Draws) -> Array:
 
     def g(log_s, dd):
         s = jnp.exp(log_s)
-        return jnp.max(_violation(p, metric_samples(p, {n: s * dd[n] for n in p.names}, draws)))
+        v = jnp.max(_violation(p, metric_samples(p, {n: s * dd[n] for n in p.names}, draws)))
+        # Far outside its tolerances a model may have no valid state (NaN): that is infeasible.
+        return jnp.nan_to_num(v, nan=1e3, posinf=1e3)
 
     ds = jax.lax.stop_gradient(d)
-    lo, hi = math.log(_BRACKET[0]), math.log(_BRACKET[1])
+    lo, hi = jnp.asarray(math.log(_BRACKET[0])), jnp.asarray(math.log(_BRACKET[1]))
+    g_lo, g_hi = g(lo, ds), g(hi, ds)
 
-    def body(_, lh):
-        a, b = lh
-        mid = 0.5 * (a + b)
-        ok = g(mid, ds) <= 0
-        return jnp.where(ok, mid, a), jnp.where(ok, b, mid)
+    # The Illinois variant of regula falsi: a bracket kept at every step, superlinear convergence, so a
+    # dozen evaluations of the constraints (each a pass over the common samples) reach ~1e-12 in log s
+    # once the bracket is small.
+    def body(_, state):
+        a, b, ga, gb, side, _ = state
+        c = jnp.clip((a * gb - b * ga) / jnp.where(gb != ga, gb - ga, 1.0), jnp.minimum(a, b), jnp.maximum(a, b))
+        gc = g(c, ds)
+        left = jnp.sign(gc) == jnp.sign(ga)
+        # Halve the function value at the end that stays twice in a row (Illinois), to avoid one-sided stalls.
+        ga_new = jnp.where(left, gc, jnp.where(side == -1, 0.5 * ga, ga))
+        gb_new = jnp.where(left, jnp.where(side == 1, 0.5 * gb, gb), gc)
+        return (jnp.where(left, c, a), jnp.where(left, b, c), ga_new, gb_new, jnp.where(left, 1, -1), c)
 
-    a, b = jax.lax.fori_loop(0, 48, body, (jnp.asarray(lo), jnp.asarray(hi)))
-    log_s = jax.lax.stop_gradient(0.5 * (a + b))
+    def bisect(_, state):
+        a, b, ga, gb = state
+        m = 0.5 * (a + b)
+        gm = g(m, ds)
+        left = jnp.sign(gm) == jnp.sign(ga)
+        return jnp.where(left, m, a), jnp.where(left, b, m), jnp.where(left, gm, ga), jnp.where(left, gb, gm)
+
+    # Feasible at the small end, infeasible at the large one (else the bracket's end is the answer). Ten halvings
+    # first (the constraints are far from linear in log s over the whole bracket), then regula falsi.
+    a, b, ga, gb_ = jax.lax.fori_loop(0, 10, bisect, (lo, hi, g_lo, g_hi))
+    *_, found = jax.lax.fori_loop(0, 14, body, (a, b, ga, gb_, jnp.asarray(0), a))
+    found = jnp.where(g_lo > 0, lo, jnp.where(g_hi <= 0, hi, found))
+    log_s = jax.lax.stop_gradient(found)
     # Implicit-function theorem at the root: d(log s) = −∂g/∂d · dd / ∂g/∂(log s).
     g_s = jax.lax.stop_gradient(jax.grad(g)(log_s, ds))
     g_live = g(log_s, d) - jax.lax.stop_gradient(g(log_s, ds))
@@ -349,7 +370,7 @@ def _scale(p: BudgetProblem, d: Mapping[str, Array], draws: _Draws) -> Array:
     return jnp.exp(log_s - jnp.where(jnp.abs(g_s) > 0, g_live / safe, 0.0))
 
 
-def _tight(p: BudgetProblem, y: Array, draws: _Draws) -> dict[str, Array]:
+def tight_tolerances(p: BudgetProblem, y: Array, draws: _Draws) -> dict[str, Array]:
     """Tolerances in the direction e^y, scaled so that the binding constraint holds exactly."""
     d = {n: jnp.exp(y[i]) for i, n in enumerate(p.names)}
     s = _scale(p, d, draws)
@@ -406,8 +427,8 @@ def _calibrate_and_verify(p: BudgetProblem, direction: dict[str, float], capped:
     """Scale the uncapped tolerances so every exact statistic on a fresh sample meets its spec with
     a four-standard-error margin, then verify on another fresh sample."""
     k_cal, k_ver = jax.random.split(key)
-    cal = _draws(p, k_cal, n_check)
-    ver = _draws(p, k_ver, n_check)
+    cal = common_draws(p, k_cal, n_check)
+    ver = common_draws(p, k_ver, n_check)
     run = jax.jit(lambda t, d: metric_samples(p, t, d, exact=True))
 
     def level(c: Constraint) -> float | None:
@@ -464,7 +485,7 @@ def optimise_budget(p: BudgetProblem, *, key: int | PRNGKeyArray, n_samples: int
     """
     require_x64()
     k_crn, k_check = jax.random.split(as_key(key))
-    draws = _draws(p, k_crn, n_samples)
+    draws = common_draws(p, k_crn, n_samples)
     if any(float(v) > 0 for v in p.minimum.values()):
         worst = float(jnp.max(_violation(p, metric_samples(p, p.minimum, draws))))
         if worst > 0:
@@ -473,13 +494,13 @@ def optimise_budget(p: BudgetProblem, *, key: int | PRNGKeyArray, n_samples: int
             return _failed(p, RESULTS.infeasible)
 
     def objective(y, args):
-        return _capped_cost(p, _tight(p, y, draws))
+        return _capped_cost(p, tight_tolerances(p, y, draws))
 
     # Start from the nominal tolerances' proportions.
     y0 = jnp.log(jnp.asarray([float(p.nominal[n]) for n in p.names]))
     # The smoothed statistic is not smooth to machine precision: ask for 1e-6 relative cost.
     sol = optx.minimise(objective, optx.BFGS(rtol=1e-6, atol=1e-6), y0, None, max_steps=max_steps, throw=False)
-    tol = _tight(p, sol.value, draws)
+    tol = tight_tolerances(p, sol.value, draws)
     capped = {n for n in p.names if float(tol[n]) >= float(p.maximum[n])}
     finer = [n for n in p.names if float(tol[n]) < float(p.minimum[n])]
     if finer:
@@ -513,7 +534,7 @@ def contributions(p: BudgetProblem, tolerances: Mapping[str, float], *, key: int
     For a homogeneous problem (a linear drive's peak) the contributions add up to the
     statistic itself by Euler's theorem: each is the share of the TE a source owns.
     """
-    draws = _draws(p, as_key(key), n_samples)
+    draws = common_draws(p, as_key(key), n_samples)
     t = {n: jnp.asarray(float(tolerances[n])) for n in p.names}
     c0 = p.constraints[0]
     g = eqx.filter_jit(jax.grad(lambda tt, dr: statistic(p, metric_samples(p, tt, dr)[0], c0)))(t, draws)
