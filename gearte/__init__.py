@@ -74,18 +74,20 @@ from .optimise.allocation import (
     worst_case as worst_case,
 )
 from .optimise.budget import (
-    AbstractStatistic as AbstractStatistic,
     BudgetProblem as BudgetProblem,
     BudgetResult as BudgetResult,
     Constraint as Constraint,
-    MeanKSigma as MeanKSigma,
-    Yield as Yield,
     budget_problem as budget_problem,
     contributions as contributions,
     optimise_budget as optimise_budget,
     pareto_front as pareto_front,
-    smooth_quantile as smooth_quantile,
     uniform_scaling as uniform_scaling,
+)
+from .optimise.statistics import (
+    AbstractStatistic as AbstractStatistic,
+    MeanKSigma as MeanKSigma,
+    Yield as Yield,
+    smooth_quantile as smooth_quantile,
 )
 from .optimise.costs import (
     AbstractCostModel as AbstractCostModel,

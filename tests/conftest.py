@@ -13,7 +13,7 @@ jax.config.update("jax_numpy_dtype_promotion", "strict")
 # which inherit the variable) reuses compiled code instead of compiling it again.
 _CACHE = os.environ.setdefault("GEARTE_TEST_JAX_CACHE", str(Path(__file__).resolve().parents[1] / ".pytest_cache" / "jax"))
 jax.config.update("jax_compilation_cache_dir", _CACHE)
-jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", _CACHE)
 
 sys.path.insert(0, os.path.dirname(__file__))

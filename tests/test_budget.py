@@ -1,5 +1,6 @@
 """Tolerance budgets: smooth statistic, homogeneity, gradients, verified yield, infeasibility, study files."""
 
+import functools
 import json
 import math
 from pathlib import Path
@@ -12,9 +13,8 @@ from jax.test_util import check_grads
 from scipy import stats as sps
 
 import gearte
-from gearte import cli
-from gearte._budget import _draws, budget_problem, contributions, optimise_budget, smooth_quantile, statistic, te_samples, uniform_scaling
-from gearte._config import ConfigError, load_study
+from gearte import ConfigError, budget_problem, cli, contributions, optimise_budget, smooth_quantile, uniform_scaling
+from gearte.cli.config import load_study
 from gearte.drives import ExplicitDrive, ExplicitTerm
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -28,18 +28,52 @@ def two_source_problem(spec=20 * GAIN, target=0.99, **kw):
                                "b": gearte.ErrorSource(law(10.0), gearte.UniformPhase())}, d.error_sources)
     # b costs four times as much to tighten: the budget should tighten a more.
     costs = {"a": gearte.Reciprocal(0.0, 10.0), "b": gearte.Reciprocal(0.0, 40.0)}
-    return budget_problem(d, model, costs=costs, nominal={"a": 10.0, "b": 10.0}, spec=spec, target=target, **kw)
+    return budget_problem(d, model, costs=costs, nominal={"a": 10.0, "b": 10.0}, spec=spec, statistic=gearte.Yield(target), **kw)
+
+
+def study_at(p, tolerances):
+    """The Monte Carlo study of a budget problem at these tolerances: each budgeted law scaled by T/T_nominal.
+
+    Built from public pieces only, independently of the budget's own common-random-number
+    machinery; `gearte.monte_carlo(study, key=k)` draws sample i with fold_in(k, i), the same
+    keys as the budget's `contributions(key=k)` (one key convention for every study).
+    """
+    model = p.model.replace(**{n: gearte.ErrorSource(p.model.sources[n].magnitude.scaled(tolerances[n] / float(p.nominal[n])),
+                                                     p.model.sources[n].phase) for n in p.names})
+    return gearte.TEStudy(p.drive, model, metric=p.constraints[0].metric)
+
+
+def te_samples(p, tolerances, key, n):
+    """The exact metric (rad) of samples 0 … n − 1 at these tolerances.
+
+    One block shape for every call (2 blocks of 1000 per compiled call): every study of the
+    two-source problem, at any tolerances and sample count, reuses one compiled program.
+    """
+    return gearte.monte_carlo(study_at(p, tolerances), key=key, n_samples=n, block_size=1000, chunk_size=2000).values
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _smooth_statistic(x, target, width):
+    return smooth_quantile(x, target, width * jnp.mean(x))
+
+
+def statistic(p, x):
+    """The budget's smooth yield statistic: the kernel-smoothed target-quantile, width relative to the mean."""
+    return _smooth_statistic(jnp.asarray(x), p.constraints[0].statistic.target, p.width)
 
 
 def test_smooth_quantile_tends_to_the_empirical_one_and_has_exact_gradients():
     x = jnp.asarray(np.random.default_rng(0).normal(size=4001))
     np.testing.assert_allclose(smooth_quantile(x, 0.95, 1e-4), np.quantile(x, 0.95), atol=2e-3)
-    g = jax.grad(lambda v: smooth_quantile(v, 0.9, 0.05))(x)
+    # Compiled once each (check_grads evaluates them many times).
+    q_fixed = jax.jit(lambda v: smooth_quantile(v, 0.9, 0.05))
+    q_data = jax.jit(lambda v: smooth_quantile(v, 0.9, 0.02 * jnp.mean(jnp.abs(v))))
+    g = jax.grad(q_fixed)(x)
     np.testing.assert_allclose(float(jnp.sum(g)), 1.0, rtol=1e-12)  # shifting every sample shifts the quantile
     assert float(jnp.min(g)) >= 0
-    check_grads(lambda v: smooth_quantile(v, 0.9, 0.05), (x[:200],), order=1, modes=["rev"], eps=1e-6, atol=1e-7, rtol=1e-5)
+    check_grads(q_fixed, (x[:200],), order=1, modes=["rev"], eps=1e-6, atol=1e-7, rtol=1e-5)
     # A width that depends on the data (as the budget's does) is differentiated through as well.
-    check_grads(lambda v: smooth_quantile(v, 0.9, 0.02 * jnp.mean(jnp.abs(v))), (x[:200],), order=1, modes=["rev"], eps=1e-6, atol=1e-7, rtol=1e-5)
+    check_grads(q_data, (x[:200],), order=1, modes=["rev"], eps=1e-6, atol=1e-7, rtol=1e-5)
     # ... and then the smoothed quantile is homogeneous: q(s·x) = s·q(x).
     xp = jnp.abs(x)
     np.testing.assert_allclose(smooth_quantile(3.0 * xp, 0.9, 0.02 * jnp.mean(3.0 * xp)), 3.0 * smooth_quantile(xp, 0.9, 0.02 * jnp.mean(xp)), rtol=1e-12)
@@ -47,19 +81,27 @@ def test_smooth_quantile_tends_to_the_empirical_one_and_has_exact_gradients():
 
 def test_te_is_homogeneous_in_the_tolerances_and_contributions_add_up():
     p = two_source_problem()
-    draws = _draws(p, jax.random.key(1), 2000)
-    t = {"a": jnp.asarray(4.0), "b": jnp.asarray(7.0)}
-    np.testing.assert_allclose(te_samples(p, {k: 2.5 * v for k, v in t.items()}, draws), 2.5 * te_samples(p, t, draws), rtol=1e-12)
-    c = contributions(p, {"a": 4.0, "b": 7.0}, key=1, n_samples=2000)
+    assert p.homogeneous  # a linear drive's peak, magnitudes toleranced about 0: the exact scaling the optimiser uses
+    t = {"a": 4.0, "b": 7.0}
+    x = te_samples(p, t, 1, 2000)
+    np.testing.assert_allclose(te_samples(p, {k: 2.5 * v for k, v in t.items()}, 1, 2000), 2.5 * x, rtol=1e-12)
+    c = contributions(p, t, key=1, n_samples=2000)
     # Euler's theorem for a degree-1 homogeneous statistic.
-    np.testing.assert_allclose(sum(c.values()), float(statistic(p, te_samples(p, t, draws))), rtol=1e-9)
+    np.testing.assert_allclose(sum(c.values()), float(statistic(p, x)), rtol=1e-9)
 
 
 def test_gradient_of_the_monte_carlo_statistic_against_finite_differences():
+    # The budget's gradient of its Monte Carlo statistic (its contributions ∂stat/∂T_i · T_i, on
+    # common random numbers) against float64 central differences of that statistic, recomputed
+    # from plain Monte Carlo studies on the same samples.
     p = two_source_problem()
-    draws = _draws(p, jax.random.key(2), 3000)
-    f = lambda ta, tb: statistic(p, te_samples(p, {"a": ta, "b": tb}, draws))
-    check_grads(f, (jnp.asarray(6.0), jnp.asarray(3.0)), order=1, modes=["rev"], eps=1e-5, atol=1e-10, rtol=1e-4)
+    t = {"a": 6.0, "b": 3.0}
+    c = contributions(p, t, key=2, n_samples=3000)
+    eps = 1e-5
+    for n in p.names:
+        up = float(statistic(p, te_samples(p, t | {n: t[n] + eps}, 2, 3000)))
+        down = float(statistic(p, te_samples(p, t | {n: t[n] - eps}, 2, 3000)))
+        np.testing.assert_allclose(c[n] / t[n], (up - down) / (2 * eps), atol=1e-10, rtol=1e-4, err_msg=n)
 
 
 def test_single_source_budget_matches_the_closed_form():
@@ -67,8 +109,10 @@ def test_single_source_budget_matches_the_closed_form():
     # the 99 % yield at spec needs T = spec / (g · q₀.₉₉(u)), with u's quantile known in closed form.
     d = ExplicitDrive([ExplicitTerm("a", 1)], gain=GAIN)
     model = gearte.ErrorModel({"a": gearte.ErrorSource(gearte.Rayleigh(5.0, truncate_at=10.0), gearte.UniformPhase())}, d.error_sources)
-    p = budget_problem(d, model, costs={"a": gearte.Reciprocal(0.0, 1.0)}, nominal={"a": 10.0}, spec=20 * GAIN, target=0.99)
+    p = budget_problem(d, model, costs={"a": gearte.Reciprocal(0.0, 1.0)}, nominal={"a": 10.0}, spec=20 * GAIN,
+                       statistic=gearte.Yield(0.99))
     r = optimise_budget(p, key=0, n_samples=2000, n_check=40_000)
+    assert r.result == gearte.RESULTS.successful and r.converged
     cdf1 = sps.rayleigh(scale=0.5).cdf(1.0)
     q = sps.rayleigh(scale=0.5).ppf(0.99 * cdf1)  # quantile of u = magnitude / T
     assert r.tolerances["a"] == pytest.approx(20.0 / q, rel=0.01)
@@ -83,10 +127,9 @@ def test_optimised_budget_is_cheaper_and_meets_the_yield_on_a_fresh_seed():
     assert r.verified_samples == 40_000
     assert r.cost < 0.97 * b.cost
     assert r.tolerances["a"] < r.tolerances["b"]  # the cheaper source is tightened
-    # Fresh seed, independent of everything above.
-    draws = _draws(p, jax.random.key(99), 40_000)
-    x = np.asarray(te_samples(p, {k: jnp.asarray(v) for k, v in r.tolerances.items()}, draws))
-    assert np.mean(x <= float(p.spec)) >= 0.99 - 3 * math.sqrt(0.99 * 0.01 / 40_000)
+    # Fresh seed, independent of everything above: a plain Monte Carlo study at the found tolerances.
+    x = te_samples(p, r.tolerances, 99, 40_000)
+    assert np.mean(x <= float(p.constraints[0].spec)) >= 0.99 - 3 * math.sqrt(0.99 * 0.01 / 40_000)
 
 
 def test_bad_budget_inputs():
@@ -96,12 +139,23 @@ def test_bad_budget_inputs():
         two_source_problem(target=1.2)
     with pytest.raises(ValueError, match="nominal"):
         budget_problem(two_source_problem().drive, two_source_problem().model, costs=two_source_problem().costs, nominal={"a": 10.0, "b": 0.0}, spec=1e-4)
+    # A budget may cover some of the sources now (the others keep their laws); a cost model must name a source.
+    q = two_source_problem()
     with pytest.raises(ValueError, match="costs"):
-        budget_problem(two_source_problem().drive, two_source_problem().model, costs={"a": gearte.Reciprocal(0, 1)}, nominal={"a": 1, "b": 1}, spec=1e-4)
+        budget_problem(q.drive, q.model, costs={"a": gearte.Reciprocal(0, 1), "z": gearte.Reciprocal(0, 1)}, nominal={"a": 1, "z": 1}, spec=1e-4)
+    with pytest.raises(ValueError, match="costs"):
+        budget_problem(q.drive, q.model, costs={}, nominal={}, spec=1e-4)
+    with pytest.raises(ValueError, match="nominal"):
+        budget_problem(q.drive, q.model, costs={"a": gearte.Reciprocal(0, 1)}, nominal={"a": 1, "b": 1}, spec=1e-4)
+    assert budget_problem(q.drive, q.model, costs={"a": gearte.Reciprocal(0, 1)}, nominal={"a": 1}, spec=1e-4).names == ["a"]
     with pytest.raises(ValueError, match="minimum"):
         two_source_problem(minimum={"a": -1.0})
-    with pytest.raises(ValueError, match="infeasible spec"):
-        optimise_budget(two_source_problem(spec=1 * GAIN, minimum={"a": 5.0, "b": 5.0}), key=0, n_samples=500, n_check=2000)
+    # An infeasible spec is a solve's result (RESULTS.infeasible): raised by default, reported with throw=False.
+    tight = two_source_problem(spec=1 * GAIN, minimum={"a": 5.0, "b": 5.0})
+    with pytest.raises(RuntimeError, match="cannot be met"):
+        optimise_budget(tight, key=0, n_samples=500, n_check=2000)
+    r = optimise_budget(tight, key=0, n_samples=500, n_check=2000, throw=False)
+    assert r.result == gearte.RESULTS.infeasible and math.isnan(r.cost)
     with pytest.raises(ValueError, match="> 0"):
         gearte.Reciprocal(0.0, 1.0)(jnp.asarray(-1.0))
 

@@ -61,13 +61,15 @@ MODELS = [gearte.Reciprocal(0.5, 20.0), gearte.ReciprocalSquare(0.5, 200.0), gea
 @pytest.mark.parametrize("model", MODELS, ids=lambda m: type(m).__name__)
 def test_decreasing_vmap_and_gradients(model):
     T = jnp.geomspace(2.0, 200.0, 401)
-    c = jax.vmap(model)(T)
-    np.testing.assert_allclose(c, model(T), rtol=1e-14)
+    # Compiled (one program each, rather than one tiny program per operation and shape).
+    c = jax.jit(jax.vmap(model))(T)
+    np.testing.assert_allclose(c, jax.jit(lambda t: model(t))(T), rtol=1e-14)
     assert np.all(np.diff(np.asarray(c)) < 0)
-    g = jax.vmap(jax.grad(model))(T)
+    g = jax.jit(jax.vmap(jax.grad(model)))(T)
     assert np.all(np.asarray(g) < 0)
+    compiled = jax.jit(lambda t: model(t))  # compiled once for the derivative checks' many evaluations
     for t in [3.0, 17.0, 41.0, 150.0]:
-        check_grads(model, (t,), order=1, modes=["fwd", "rev"], eps=1e-6)
+        check_grads(compiled, (t,), order=1, modes=["fwd", "rev"], eps=1e-6)
     # Compiles once for every tolerance.
     f = jax.jit(eqx.debug.assert_max_traces(lambda t: model(t), max_traces=1))
     for t in [4.0, 5.0, 6.0]:
@@ -126,17 +128,18 @@ def test_grade_table_beyond_the_ends_continues_the_end_slopes():
 
 def test_grade_table_is_c1_and_monotone():
     m = _grade_table()
-    logc = lambda q: jnp.log(m(T_at(q)))
-    dlogc = jax.grad(lambda q: jnp.log(m(jnp.asarray(T5) * 2.0 ** ((q - 5.0) / 2.0))))
+    logc = jax.jit(lambda q: jnp.log(m(jnp.asarray(T5) * 2.0 ** ((q - 5.0) / 2.0))))
+    dlogc = jax.jit(jax.grad(lambda q: jnp.log(m(jnp.asarray(T5) * 2.0 ** ((q - 5.0) / 2.0)))))
     for node in [4.0, 5.0, 7.0, 9.0]:
-        left, right = float(dlogc(node - 1e-7)), float(dlogc(node + 1e-7))
+        left, right = float(dlogc(jnp.asarray(node - 1e-7))), float(dlogc(jnp.asarray(node + 1e-7)))
         np.testing.assert_allclose(left, right, rtol=1e-5, atol=1e-8)
     q = np.linspace(0.0, 13.0, 2601)
-    y = np.array([float(logc(x)) for x in q[::13]])
+    y = np.array([float(logc(jnp.asarray(x))) for x in q[::13]])
     assert np.all(np.diff(y) < 0)
     # No overshoot between nodes: ln c within the values of the interval's ends.
+    cost_of = jax.jit(jax.vmap(m))
     for a, b, ca, cb in [(4, 5, 10.0, 4.0), (5, 7, 4.0, 2.0), (7, 9, 2.0, 1.5)]:
-        c = np.asarray(jax.vmap(m)(jnp.asarray(T_at(np.linspace(a, b, 101)))))
+        c = np.asarray(cost_of(jnp.asarray(T_at(np.linspace(a, b, 101)))))
         assert c.max() <= ca * (1 + 1e-12) and c.min() >= cb * (1 - 1e-12)
 
 

@@ -2,13 +2,19 @@
 
 import math
 
+import equinox as eqx
+import hypothesis.strategies as st
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from jax.test_util import check_grads
 from scipy import stats
+from scipy import stats as sps
 
 import gearte
-from gearte._errors import ErrorModel, ErrorSource
+from gearte import ErrorModel, ErrorSource
 
 N = 20_000
 
@@ -43,14 +49,72 @@ def test_truncated_normal_uniform_normal_fixed():
     np.testing.assert_array_equal(draw(gearte.Fixed(4.0), n=5), np.full(5, 4.0))
 
 
+def test_signed_laws_for_deviations():
+    # One law family for every drive: a deviation (a pin-radius error, a pitch error) is signed.
+    np.testing.assert_array_equal(draw(gearte.Fixed(-1.5), n=5), np.full(5, -1.5))
+    x = draw(gearte.Uniform(-3.0, 2.0))
+    assert x.min() >= -3.0 and x.max() <= 2.0
+    assert stats.kstest(x, stats.uniform(-3.0, 5.0).cdf).pvalue > 0.01
+    # A tolerance band c ± h (the old SignedUniform).
+    y = draw(gearte.Uniform.centred(2.0, 1.0))
+    assert stats.kstest(y, stats.uniform(-1.0, 4.0).cdf).pvalue > 0.01
+    np.testing.assert_allclose([float(gearte.Uniform.centred(2.0, 1.0).low), float(gearte.Uniform.centred(2.0, 1.0).high)], [-1.0, 3.0])
+
+
+U = np.linspace(0.01, 0.99, 9)
+
+
+@pytest.mark.parametrize("law,params", [
+    (gearte.Uniform(2.0, 9.0), ("low", "high")),
+    (gearte.Normal(3.0, 2.0), ("mean", "std")),
+    (gearte.TruncatedNormal(5.0, 4.0, 0.0, 12.0), ("mean", "std", "low", "high")),
+    (gearte.Rayleigh(6.5, truncate_at=13.0), ("scale", "truncate_at")),
+    (gearte.Rayleigh(6.5), ("scale",)),
+], ids=lambda v: type(v).__name__ if isinstance(v, gearte.AbstractLaw) else "")
+def test_inverse_cdf_gradients_in_the_law_parameters(law, params):
+    # Budgets and sensitivities differentiate draws through the law parameters (reparameterised
+    # draws = inverse CDF of fixed uniforms): check those derivatives against float64 differences.
+    def f(theta):
+        moved = eqx.tree_at(lambda m: tuple(getattr(m, n) for n in params), law, tuple(theta[i] for i in range(len(params))))
+        return moved.ppf(jnp.asarray(U))
+
+    theta = jnp.asarray([float(getattr(law, n)) for n in params])
+    check_grads(jax.jit(f), (theta,), order=1, modes=["fwd", "rev"], eps=1e-6, atol=1e-8, rtol=1e-6)
+    # ... and `sample` is the inverse CDF of uniform draws (a Normal draws its normals directly).
+    if not isinstance(law, gearte.Normal):
+        key = jax.random.key(5)
+        np.testing.assert_allclose(law.sample(key, (7,)), law.ppf(jax.random.uniform(key, (7,), dtype=float)), rtol=1e-14)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(0.1, 50.0), st.one_of(st.none(), st.floats(0.3, 10.0)), st.lists(st.floats(0.0, 0.999), min_size=1, max_size=8))
+def test_rayleigh_inverse_cdf_against_scipy(scale, ratio, u):
+    # Conditioned on ≤ T (T = ratio · scale): F⁻¹(u) = F_R⁻¹(u · F_R(T)).
+    law = gearte.Rayleigh(scale) if ratio is None else gearte.Rayleigh(scale, truncate_at=ratio * scale)
+    ref = sps.rayleigh(scale=scale)
+    p = np.asarray(u) * (1.0 if ratio is None else ref.cdf(ratio * scale))
+    np.testing.assert_allclose(np.asarray(law.ppf(jnp.asarray(u))), ref.ppf(p), rtol=1e-10, atol=1e-12 * scale)
+
+
 def test_uniform_phase():
     x = draw(gearte.UniformPhase())
     assert x.min() >= 0 and x.max() < 2 * math.pi
     assert stats.kstest(x, stats.uniform(0, 2 * math.pi).cdf).pvalue > 0.01
 
 
+def _eccentricity_model(law):
+    spec = {"e": gearte.SourceSpec("e", "eccentricity")}
+    return ErrorModel({"e": ErrorSource(law, gearte.UniformPhase())}, spec)
+
+
 @pytest.mark.parametrize("make,match", [
-    (lambda: gearte.Fixed(-1.0), "negative"),
+    # A magnitude cannot be negative: signed laws are legal (deviations are signed), so the check
+    # is where a law becomes a magnitude (the error model) and where a magnitude is given (Eccentricity).
+    (lambda: _eccentricity_model(gearte.Fixed(-1.0)), "negative"),
+    (lambda: _eccentricity_model(gearte.Uniform(-1.0, 2.0)), "negative"),
+    (lambda: gearte.Eccentricity(-5.0, 0.0), "negative"),
+    (lambda: gearte.Eccentricity([1.0, -5.0], 0.0), "negative"),
+    (lambda: gearte.Uniform.centred(-1.0), "negative"),
     (lambda: gearte.Fixed(float("nan")), "finite"),
     (lambda: gearte.Uniform(5.0, 1.0), "high"),
     (lambda: gearte.Rayleigh(0.0), "> 0"),
@@ -64,8 +128,13 @@ def test_bad_laws(make, match):
         make()
 
 
+def specs(counts):
+    """Declared eccentricity sources with these instance counts (as a drive's `error_sources`)."""
+    return {n: gearte.SourceSpec(n, "eccentricity", shape=(c,)) for n, c in counts.items()}
+
+
 def test_relative_phase_rule_and_per_planet_broadcast():
-    counts = {"a": 1, "b": 3, "c": 1}
+    counts = specs({"a": 1, "b": 3, "c": 1})
     model = ErrorModel({
         "a": ErrorSource(gearte.Fixed(1.0), gearte.UniformPhase()),
         "b": ErrorSource(gearte.Fixed(2.0), gearte.RelativePhase("a", 7 * math.pi / 9)),
@@ -77,14 +146,30 @@ def test_relative_phase_rule_and_per_planet_broadcast():
     assert e["b"].phase.shape == (100, 3)
 
 
+def test_magnitude_and_deviation_laws_in_the_error_model():
+    spec = {"e": gearte.SourceSpec("e", "eccentricity"), "d": gearte.SourceSpec("d", "deviation", shape=(4,))}
+    # A signed deviation takes a signed law, and no phase.
+    model = ErrorModel({"e": ErrorSource(gearte.Fixed(2.0), gearte.FixedPhase(0.5)), "d": ErrorSource(gearte.Fixed(-1.0))}, spec)
+    e = model.sample(jax.random.key(0))
+    np.testing.assert_array_equal(e["d"], np.full(4, -1.0))
+    np.testing.assert_array_equal(e["e"].magnitude, [2.0])
+    with pytest.raises(ValueError, match="no phase law"):
+        ErrorModel({"e": ErrorSource(1.0, gearte.UniformPhase()), "d": ErrorSource(1.0, gearte.UniformPhase())}, spec)
+    with pytest.raises(ValueError, match="phase law"):
+        ErrorModel({"e": ErrorSource(1.0), "d": ErrorSource(1.0)}, spec)
+    # A normal magnitude is allowed, as in 0.1: a negative draw is that magnitude at the opposite phase.
+    m = _eccentricity_model(gearte.Normal(5.0, 1.0))
+    assert m.sample(jax.random.key(1))["e"].magnitude.shape == (1,)
+
+
 def test_rule_errors():
-    counts = {"a": 1, "b": 1}
+    counts = specs({"a": 1, "b": 1})
     with pytest.raises(ValueError, match="cycle"):
         ErrorModel({"a": ErrorSource(1.0, gearte.RelativePhase("b")), "b": ErrorSource(1.0, gearte.RelativePhase("a"))}, counts)
     with pytest.raises(ValueError, match="not an error source"):
         ErrorModel({"a": ErrorSource(1.0, gearte.RelativePhase("z")), "b": ErrorSource(1.0, 0.0)}, counts)
     with pytest.raises(ValueError, match="cannot follow"):
-        ErrorModel({"a": ErrorSource(1.0, gearte.RelativePhase("b")), "b": ErrorSource(1.0, 0.0)}, {"a": 1, "b": 3})
+        ErrorModel({"a": ErrorSource(1.0, gearte.RelativePhase("b")), "b": ErrorSource(1.0, 0.0)}, specs({"a": 1, "b": 3}))
     with pytest.raises(ValueError, match="missing"):
         ErrorModel({"a": ErrorSource(1.0, 0.0)}, counts)
     with pytest.raises(ValueError, match="unknown"):

@@ -9,14 +9,22 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import reference_extrema, trig_eval
 from hypothesis import given, settings
 from jax.test_util import check_grads
 
 import gearte
-from gearte._signal import as_frequency
-from helpers import reference_extrema, trig_eval
 
 SETTINGS = settings(max_examples=25, deadline=None)
+
+# Metrics are objects, `metric(drive, signal)`; a sinusoidal drive reads a signal through its
+# exact extrema, whatever the signal, so any such drive serves for bare signals.
+ANY_DRIVE = gearte.ExplicitDrive([gearte.ExplicitTerm("a", 1)], gain=1.0)
+METRICS = (gearte.Peak(), gearte.PeakToPeak(), gearte.RMS())
+
+
+def te_metric(signal, metric):
+    return metric(ANY_DRIVE, signal)
 
 
 def make(amps, phases, freqs, gain=1.0):
@@ -37,6 +45,7 @@ def components(draw, max_n=6):
 
 
 def test_as_frequency():
+    as_frequency = gearte.as_frequency
     assert as_frequency("11/24") == Fraction(11, 24)
     assert as_frequency(0.125) == Fraction(1, 8)
     assert as_frequency(3) == Fraction(3)
@@ -63,17 +72,32 @@ def test_evaluate_matches_plain_sum(comp, gain):
     np.testing.assert_allclose(got, gain * trig_eval(amps, phases, freqs, theta), rtol=1e-12, atol=atol)
 
 
+# The exact search is compiled once per signal structure (its orders), ~1-2 s each: the three
+# whole-period properties below (exact against the dense reference, positively homogeneous in
+# the amplitudes, invariant to a shift of the input angle) are checked on the same drawn
+# structure, so each of the 25 examples compiles once instead of three times.
 @SETTINGS
-@given(components())
-def test_extrema_exact_against_dense_reference(comp):
+@given(components(), st.floats(0.05, 20.0), st.floats(-100.0, 100.0))
+def test_extrema_exact_linear_in_amplitudes_and_invariant_to_a_shift(comp, c, shift):
     amps, phases, freqs = comp
-    e = gearte.extrema(make(amps, phases, freqs))
+    base = make(amps, phases, freqs)
+    # Exact against an independent dense + Brent reference.
+    e = gearte.extrema(base)
     ref_max, ref_min = reference_extrema(amps, phases, freqs)
     scale = max(abs(ref_max), abs(ref_min), 1e-12)
     assert abs(float(e.max) - ref_max) <= 1e-6 * scale
     assert abs(float(e.min) - ref_min) <= 1e-6 * scale
     # The located angles really give those values.
     np.testing.assert_allclose(trig_eval(amps, phases, freqs, [float(e.theta_max)])[0], float(e.max), rtol=0, atol=1e-12 * scale)
+    # Linear in the amplitudes: every metric of c·TE is c times the metric of TE.
+    scaled = make(c * amps, phases, freqs)
+    for m in METRICS:
+        np.testing.assert_allclose(te_metric(scaled, m), c * te_metric(base, m), rtol=1e-9, atol=1e-12, err_msg=f"linear: {m.name}")
+    # Starting the record elsewhere, φ_j → φ_j + r_j·δ, changes no whole-period metric.
+    shifted = phases + np.array([float(f) for f in freqs]) * shift
+    for m in METRICS:
+        np.testing.assert_allclose(te_metric(make(amps, shifted, freqs), m), te_metric(base, m),
+                                   rtol=1e-8, atol=1e-10, err_msg=f"shift: {m.name}")
 
 
 def test_extrema_beats_of_near_equal_frequencies():
@@ -103,6 +127,18 @@ def test_closed_forms():
     np.testing.assert_allclose(gearte.rms(s3), math.sqrt(4.0 + a * a / 2), rtol=1e-12)
 
 
+def test_metric_objects_are_the_exact_functions():
+    s = make([3.0, 2.0, 1.0], [0.7, 0.1, 1.0], ["5/3", "1/3", 0])
+    for m, f in zip(METRICS, (gearte.peak, gearte.peak_to_peak, gearte.rms)):
+        assert isinstance(m, gearte.AbstractMetric)
+        assert float(m(ANY_DRIVE, s)) == float(f(s))
+        # Exact metrics of a sinusoidal TE are Lipschitz already: their optimiser surrogate is the value itself.
+        assert float(m.smooth(ANY_DRIVE, s)) == float(f(s))
+        assert m.quantity == "angle" and m.homogeneous and not m.higher_is_better and m.label and m.describe()
+    # A sinusoidal drive offers the three, peak first (the default metric of a study).
+    assert [m.name for m in METRICS] == list(ANY_DRIVE.metrics) == ["peak", "peak_to_peak", "rms"]
+
+
 def test_spectrum_lines():
     s = make([5.0, 3.0, 2.0], [0.2, 2.5, 1.0], ["7/8", "7/8", "-1/8"])
     sp = gearte.spectrum(s)
@@ -116,10 +152,10 @@ def test_zero_errors_zero_te_and_finite_gradients():
     freqs = ["7/8", "7/24", "1/8", 0]
 
     def f(metric):
-        return lambda a, p: gearte.te_metric(gearte.to_signal(gearte.Components(a, p, freqs)), metric)
+        return lambda a, p: te_metric(gearte.to_signal(gearte.Components(a, p, freqs)), metric)
 
     a0, p0 = jnp.zeros(4), jnp.zeros(4)
-    for metric in ("peak", "peak_to_peak", "rms"):
+    for metric in METRICS:
         assert float(f(metric)(a0, p0)) == 0.0
         ga, gp = jax.grad(f(metric), argnums=(0, 1))(a0, p0)
         assert np.all(np.isfinite(ga)) and np.all(np.isfinite(gp))
@@ -134,7 +170,7 @@ def test_gradient_finite_at_ties():
     np.testing.assert_allclose(g, [1.0], rtol=1e-9)
 
 
-@pytest.mark.parametrize("metric", ["peak", "peak_to_peak", "rms"])
+@pytest.mark.parametrize("metric", METRICS, ids=lambda m: m.name)
 def test_gradients_against_finite_differences(metric):
     rng = np.random.default_rng(3)
     freqs = ["7/8", "7/24", "1/8", "1/8", 0, "-7/24"]
@@ -142,7 +178,7 @@ def test_gradients_against_finite_differences(metric):
     phases = rng.uniform(0, 2 * math.pi, len(freqs))
 
     def f(a, p):
-        return gearte.te_metric(gearte.to_signal(gearte.Components(a, p, freqs, gain=1e-5)), metric)
+        return te_metric(gearte.to_signal(gearte.Components(a, p, freqs, gain=1e-5)), metric)
 
     # Away from ties the exact metrics are smooth: check first-order derivatives in float64.
     check_grads(f, (jnp.asarray(amps), jnp.asarray(phases)), order=1, modes=["rev"], eps=1e-6, atol=1e-9, rtol=1e-6)
@@ -164,35 +200,15 @@ def test_smooth_peak_bounds_and_gradient():
         gearte.smooth_peak(s, width=0.0)
 
 
-@SETTINGS
-@given(components(), st.floats(0.05, 20.0))
-def test_linear_in_amplitudes(comp, c):
-    amps, phases, freqs = comp
-    base = make(amps, phases, freqs)
-    scaled = make(c * amps, phases, freqs)
-    for m in ("peak", "peak_to_peak", "rms"):
-        np.testing.assert_allclose(gearte.te_metric(scaled, m), c * gearte.te_metric(base, m), rtol=1e-9, atol=1e-12)
-
-
-@SETTINGS
-@given(components(), st.floats(-100.0, 100.0))
-def test_invariant_to_a_shift_of_the_input_angle(comp, shift):
-    # Starting the record elsewhere, φ_j → φ_j + r_j·δ, changes no whole-period metric.
-    amps, phases, freqs = comp
-    shifted = phases + np.array([float(f) for f in freqs]) * shift
-    for m in ("peak", "peak_to_peak", "rms"):
-        np.testing.assert_allclose(gearte.te_metric(make(amps, shifted, freqs), m), gearte.te_metric(make(amps, phases, freqs), m),
-                                   rtol=1e-8, atol=1e-10)
-
-
 def test_vmap_equals_loop():
     rng = np.random.default_rng(5)
     freqs = ["7/8", "7/24", "1/8", 0]
     amps, phases = rng.uniform(0, 10, (20, 4)), rng.uniform(0, 6, (20, 4))
     f = lambda a, p: gearte.peak(gearte.to_signal(gearte.Components(a, p, freqs)))
     batched = jax.vmap(f)(amps, phases)
-    looped = [f(a, p) for a, p in zip(amps, phases)]
-    # Eager and fused code may round differently in the last bit.
+    one = jax.jit(f)  # one sample at a time (compiled once for all 20)
+    looped = [one(a, p) for a, p in zip(amps, phases)]
+    # Batched and unbatched code may round differently in the last bit.
     np.testing.assert_allclose(np.asarray(batched), np.asarray(looped), rtol=1e-13, atol=0)
 
 
@@ -213,7 +229,9 @@ def test_bad_options():
     s = make([1.0], [0.0], [1])
     with pytest.raises(ValueError, match="oversample"):
         gearte.extrema(s, oversample=4)
-    with pytest.raises(ValueError, match="unknown TE metric"):
-        gearte.te_metric(s, "max")
+    # Metrics are objects now: a name is refused where a metric is chosen (the study), naming what to give.
+    model = gearte.ErrorModel({"a": gearte.ErrorSource(1.0, gearte.UniformPhase())}, ANY_DRIVE.error_sources)
+    with pytest.raises(ValueError, match="metric"):
+        gearte.TEStudy(ANY_DRIVE, model, metric="max")
     with pytest.raises(ValueError, match="last axis"):
         gearte.Components(np.ones(3), np.ones(2), [1, 2, 3])

@@ -2,7 +2,6 @@
 
 import math
 
-import equinox as eqx
 import hypothesis.strategies as st
 import jax
 import numpy as np
@@ -11,7 +10,7 @@ from hypothesis import given, settings
 from scipy import stats as sps
 
 import gearte
-from gearte._config import load_study
+from gearte.cli.config import load_study
 from gearte.drives import wang2013
 
 ARCSEC = 180 * 3600 / math.pi
@@ -20,7 +19,7 @@ ARCSEC = 180 * 3600 / math.pi
 @pytest.fixture(scope="module")
 def random_study():
     s = load_study("examples/planetary_wang2013_random.toml")
-    return gearte.TEStudy(s.drive, s.errors, metric="peak")
+    return gearte.TEStudy(s.drive, s.errors, metric=gearte.Peak())
 
 
 @settings(max_examples=8, deadline=None)
@@ -37,6 +36,18 @@ def test_one_block_and_many_blocks_per_call_agree_bitwise(random_study, chunk):
     a = gearte.monte_carlo(random_study, key=11, n_samples=600, chunk_size=chunk, block_size=64).values
     b = gearte.monte_carlo(random_study, key=11, n_samples=600, chunk_size=640, block_size=64).values
     np.testing.assert_array_equal(a, b)
+
+
+def test_progress_bar_shows_on_request_and_changes_nothing(random_study, capsys):
+    # The progress bar (tqdm, on stderr) is shown when asked for, never when stderr is not a terminal
+    # by default, and it changes no value. (Blocks of 64, two per call: the program compiled above.)
+    kw = dict(key=7, n_samples=300, chunk_size=128, block_size=64)
+    quiet = gearte.monte_carlo(random_study, **kw).values
+    assert "samples" not in capsys.readouterr().err
+    shown = gearte.monte_carlo(random_study, progress=True, desc="planetary study", **kw).values
+    err = capsys.readouterr().err
+    assert "planetary study" in err and "300" in err and "samples" in err
+    np.testing.assert_array_equal(quiet, shown)
 
 
 def test_prefix_property_and_seeds(random_study):

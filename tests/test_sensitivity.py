@@ -12,16 +12,15 @@ import pytest
 from scipy import stats as sps
 
 import gearte
-from gearte._budget import budget_problem, contributions
-from gearte._config import load_study
-from gearte._sensitivity import sensitivity_table, sobol_indices
+from gearte import budget_problem, contributions, sensitivity_table, sobol_indices
+from gearte.cli.config import load_study
 from gearte.drives import ExplicitDrive, ExplicitTerm, Planetary2KH
 
 ROOT = Path(__file__).resolve().parents[1]
 GAIN = 1e-5  # rad/µm
 
 
-def study(terms, sources, *, metric="peak"):
+def study(terms, sources, *, metric=gearte.Peak()):
     d = ExplicitDrive([ExplicitTerm(s, f, offset=o) for s, f, o in terms], gain=GAIN)
     return gearte.TEStudy(d, gearte.ErrorModel(sources, d.error_sources), metric=metric)
 
@@ -176,18 +175,29 @@ def two_source_problem():
     model = gearte.ErrorModel({"a": gearte.ErrorSource(law(10.0), gearte.UniformPhase()),
                                "b": gearte.ErrorSource(law(20.0), gearte.UniformPhase())}, d.error_sources)
     return budget_problem(d, model, costs={"a": gearte.Reciprocal(0.0, 1.0), "b": gearte.Reciprocal(0.0, 1.0)},
-                          nominal={"a": 10.0, "b": 20.0}, spec=20 * GAIN, target=0.99)
+                          nominal={"a": 10.0, "b": 20.0}, spec=20 * GAIN, statistic=gearte.Yield(0.99))
+
+
+def budget_study(p):
+    """The per-sample study of a budget problem: its drive, its laws at the nominal tolerances, its metric."""
+    return gearte.TEStudy(p.drive, p.model, metric=p.constraints[0].metric)
+
+
+def tolerance_scale(p, tolerances):
+    """Sobol' `scale` factors for these tolerances: T / T_nominal per source."""
+    return {n: tolerances[n] / float(p.nominal[n]) for n in p.names}
 
 
 def test_budget_problem_tolerances_scale_the_laws():
     p = two_source_problem()
-    base = sobol_indices(p, key=4, n=512)
+    st = budget_study(p)
+    base = sobol_indices(st, key=4, n=512)
     # TE is homogeneous of degree 1 in the tolerances: scaling them all leaves every index unchanged.
-    both = sobol_indices(p, key=4, n=512, tolerances={"a": 30.0, "b": 60.0})
+    both = sobol_indices(st, key=4, n=512, scale=tolerance_scale(p, {"a": 30.0, "b": 60.0}))
     np.testing.assert_allclose(both.first_order, base.first_order, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(both.mean, 3 * base.mean, rtol=1e-12)
     # Loosening a alone moves the variance towards a.
-    a_loose = sobol_indices(p, key=4, n=512, tolerances={"a": 40.0, "b": 20.0})
+    a_loose = sobol_indices(st, key=4, n=512, scale=tolerance_scale(p, {"a": 40.0, "b": 20.0}))
     assert a_loose.source_total_order["a"] > base.source_total_order["a"] + 0.2
 
 
@@ -198,7 +208,8 @@ def test_sensitivity_table_puts_contributions_and_sobol_side_by_side():
     assert t.sources == ["a", "b"]
     k_grad, k_sobol = jax.random.split(jax.random.key(6))
     assert t.contribution == contributions(p, tol, key=k_grad, n_samples=1024)
-    np.testing.assert_array_equal(t.sobol.total_order, sobol_indices(p, key=k_sobol, n=256, tolerances=tol).total_order)
+    np.testing.assert_array_equal(t.sobol.total_order, sobol_indices(budget_study(p), key=k_sobol, n=256,
+                                                                     scale=tolerance_scale(p, tol)).total_order)
     np.testing.assert_allclose(sum(r["contribution_rad"] for r in t.rows()), t.statistic, rtol=1e-12)
     np.testing.assert_allclose(sum(r["share"] for r in t.rows()), 1.0, rtol=1e-12)
     assert {r["source"]: r["sobol_total_order"] for r in t.rows()} == t.sobol.source_total_order
@@ -212,11 +223,11 @@ def test_sensitivity_table_puts_contributions_and_sobol_side_by_side():
         t.format(unit="furlong")
 
 
-class NoInverse(gearte.AbstractMagnitude):
+class NoInverse(gearte.AbstractLaw):
     def sample(self, key, shape):
         return jax.random.uniform(key, shape, dtype=float)
 
-    def describe(self):
+    def describe(self, unit="µm"):
         return "no inverse CDF"
 
 
@@ -225,8 +236,12 @@ def test_bad_inputs(monkeypatch):
     for n in (1000, 8, True, 64.0):
         with pytest.raises(ValueError, match="power of 2"):
             sobol_indices(good, key=0, n=n)
-    with pytest.raises(ValueError, match="only for a budget problem"):
-        sobol_indices(good, key=0, n=64, tolerances={"a": 1.0})
+    # Tolerances scale the laws through `scale` (a factor per source, > 0, of a source of the model).
+    with pytest.raises(ValueError, match="not an error source"):
+        sobol_indices(good, key=0, n=64, scale={"z": 1.0})
+    for bad in (0.0, -2.0, float("nan")):
+        with pytest.raises(ValueError, match="factor > 0"):
+            sobol_indices(good, key=0, n=64, scale={"a": bad})
     with pytest.raises(ValueError, match="TEStudy"):
         sobol_indices(good.drive, key=0, n=64)
     with pytest.raises(ValueError, match="seed"):
@@ -235,13 +250,16 @@ def test_bad_inputs(monkeypatch):
         sobol_indices(good, key=0, n=64, confidence_level=95)
     with pytest.raises(ValueError, match="block_size"):
         sobol_indices(good, key=0, n=64, block_size=0)
+    # A budget problem's tolerances (the side-by-side table of a budget) are checked where they are given.
     p = two_source_problem()
     with pytest.raises(ValueError, match="missing"):
-        sobol_indices(p, key=0, n=64, tolerances={"a": 1.0})
+        sensitivity_table(p, {"a": 1.0}, key=0)
     with pytest.raises(ValueError, match="unknown"):
-        sobol_indices(p, key=0, n=64, tolerances={"a": 1.0, "b": 1.0, "c": 1.0})
+        sensitivity_table(p, {"a": 1.0, "b": 1.0, "c": 1.0}, key=0)
     with pytest.raises(ValueError, match="> 0 µm"):
-        sobol_indices(p, key=0, n=64, tolerances={"a": 1.0, "b": -2.0})
+        sensitivity_table(p, {"a": 1.0, "b": -2.0}, key=0)
+    with pytest.raises(ValueError, match="TEStudy"):
+        sobol_indices(p, key=0, n=64)
     with pytest.raises(ValueError, match="> 0 µm"):
         sensitivity_table(p, {"a": 1.0, "b": float("nan")}, key=0)
     with pytest.raises(ValueError, match="budget problem"):

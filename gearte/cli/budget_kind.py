@@ -15,8 +15,6 @@ from ..core.units import UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import Figure
 from ..optimise.budget import (
     Constraint,
-    MeanKSigma,
-    Yield,
     budget_problem,
     contributions,
     optimise_budget,
@@ -24,6 +22,7 @@ from ..optimise.budget import (
     uniform_scaling,
 )
 from ..optimise.costs import Exponential, GradeTable, Power, Reciprocal, ReciprocalSquare
+from ..optimise.statistics import MeanKSigma, Yield
 from ..standards.iso1328 import nearest_grade
 from ..studies.errors import ErrorModel, ErrorSource
 from ..studies.laws import FixedPhase, RelativePhase, UniformPhase
@@ -291,7 +290,7 @@ def _report(study: "Study", s: dict) -> list[str]:
              f"Cheapest tolerances with {cons}. Each budgeted value is its law's centre + tolerance × a standard draw "
              f"(common random numbers, {b['optimisation_samples']:,} samples, smoothed quantile); the budget is then scaled on a fresh "
              f"sample to clear the target by four binomial standard errors and verified on another fresh sample of "
-             f"{b['verified_samples']:,}. Every source's tolerance is capped at 10 × nominal (`maximum_factor`). "
+             f"{b['verified_samples']:,}. Every source's tolerance is capped at its maximum (`maximum_factor` × nominal). "
              f"Solver converged: {b['solver_converged']} ({b['solver_result']}).", "",
              f"| source | nominal | optimised | uniform scaling | ISO grade | cost model | share of the statistic ({sym}) |",
              "|---|---|---|---|---|---|---|"]

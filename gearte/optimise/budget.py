@@ -50,44 +50,7 @@ from ..studies.errors import ErrorModel
 from ..studies.laws import AbstractValueLaw
 from ..studies.montecarlo import as_key, sample_keys
 from .costs import AbstractCostModel
-
-
-class AbstractStatistic(eqx.Module):
-    """The statistic a budget constrains (an object, as optimistix passes a norm)."""
-
-    @abc.abstractmethod
-    def describe(self) -> str:
-        """One line for reports."""
-
-
-class Yield(AbstractStatistic):
-    """P(metric meets its spec) ≥ `target`: the target-quantile of the metric against the spec."""
-
-    target: float = eqx.field(static=True)
-
-    def __init__(self, target: float = 0.9973):
-        t = float(target)
-        if not 0.5 <= t < 1:
-            raise ValueError(f"Yield.target: a yield in [0.5, 1), got {target!r}")
-        self.target = t
-
-    def describe(self) -> str:
-        return f"yield ≥ {self.target:g}"
-
-
-class MeanKSigma(AbstractStatistic):
-    """mean + k·σ of the metric against the spec (mean − kσ for a metric where more is better)."""
-
-    k: float = eqx.field(static=True)
-
-    def __init__(self, k: float = 3.0):
-        kk = float(k)
-        if not (math.isfinite(kk) and kk >= 0):
-            raise ValueError(f"MeanKSigma.k: k ≥ 0, got {k!r}")
-        self.k = kk
-
-    def describe(self) -> str:
-        return f"mean + {self.k:g}σ"
+from .statistics import AbstractStatistic, Yield
 
 
 class Constraint(eqx.Module):
@@ -268,44 +231,10 @@ def te_samples(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws)
     return metric_samples(p, tolerances, draws, exact=True)[0]
 
 
-def smooth_quantile(x: Float[Array, " n"], level: float, width, *, iterations: int = 64) -> Float[Array, ""]:
-    """Kernel-smoothed `level`-quantile of samples `x`: the q with mean σ((q − x_k)/width) = level.
-
-    Differentiable in `x` and in `width` (which may depend on `x`) by the implicit-function
-    theorem: dq = Σ_k σ'_k [dx_k + (q − x_k) dw / w] / Σ_k σ'_k. As width → 0 it tends to the
-    empirical quantile.
-    """
-    xs = jax.lax.stop_gradient(x)
-    width = jnp.asarray(width, dtype=float)
-    ws = jax.lax.stop_gradient(width)
-
-    def residual(q):
-        return jnp.mean(jax.nn.sigmoid((q - xs) / ws)) - level
-
-    def body(_, lh):  # bisection: monotone and safe for any data
-        lo, hi = lh
-        mid = 0.5 * (lo + hi)
-        up = residual(mid) > 0
-        return jnp.where(up, lo, mid), jnp.where(up, mid, hi)
-
-    lo, hi = jax.lax.fori_loop(0, iterations, body, (jnp.min(xs) - 40 * ws, jnp.max(xs) + 40 * ws))
-    q = 0.5 * (lo + hi)
-    s = jax.nn.sigmoid((q - xs) / ws)
-    wk = s * (1 - s)
-    wk = wk / jnp.sum(wk)
-    return q + jnp.sum(wk * (x - xs)) + jnp.sum(wk * (q - xs)) / ws * (width - ws)
-
-
 def statistic(p: BudgetProblem, x: Float[Array, " n"], c: Constraint | None = None) -> Float[Array, ""]:
     """The constrained statistic of metric samples `x`, smooth (rad for angles)."""
     c = p.constraints[0] if c is None else c
-    lower = c.metric.higher_is_better
-    if isinstance(c.statistic, Yield):
-        level = (1.0 - c.statistic.target) if lower else c.statistic.target
-        # Width ∝ the mean keeps the statistic positively homogeneous of degree 1, exactly.
-        return smooth_quantile(x, level, p.width * jnp.mean(jnp.abs(x)) if lower else p.width * jnp.mean(x))
-    assert isinstance(c.statistic, MeanKSigma)
-    return jnp.mean(x) - c.statistic.k * jnp.std(x) if lower else jnp.mean(x) + c.statistic.k * jnp.std(x)
+    return c.statistic.smooth(x, lower=c.metric.higher_is_better, width=p.width)
 
 
 def _violation(p: BudgetProblem, x: Array) -> Array:
@@ -413,13 +342,8 @@ def _met(c: Constraint, x: np.ndarray) -> np.ndarray:
     return x >= float(c.spec) if c.metric.higher_is_better else x <= float(c.spec)
 
 
-def _exact_stat(c: Constraint, x: np.ndarray, level: float | None = None) -> float:
-    if isinstance(c.statistic, Yield):
-        t = c.statistic.target if level is None else level
-        return float(np.quantile(x, 1.0 - t if c.metric.higher_is_better else t))
-    k = c.statistic.k  # pyright: ignore[reportAttributeAccessIssue]
-    sd = np.std(x, ddof=1)
-    return float(np.mean(x) - k * sd if c.metric.higher_is_better else np.mean(x) + k * sd)
+def _exact_stat(c: Constraint, x: np.ndarray, margin_samples: int | None = None) -> float:
+    return c.statistic.exact(x, lower=c.metric.higher_is_better, margin_samples=margin_samples)
 
 
 def _calibrate_and_verify(p: BudgetProblem, direction: dict[str, float], capped: set[str], *, key, n_check: int, label: str,
@@ -431,17 +355,9 @@ def _calibrate_and_verify(p: BudgetProblem, direction: dict[str, float], capped:
     ver = common_draws(p, k_ver, n_check)
     run = jax.jit(lambda t, d: metric_samples(p, t, d, exact=True))
 
-    def level(c: Constraint) -> float | None:
-        if not isinstance(c.statistic, Yield):
-            return None
-        t = c.statistic.target
-        # Four standard errors: the calibration and the verification samples each carry one
-        # binomial error, so the verified yield clears the target with ~99.8 % probability.
-        return min(t + 4 * math.sqrt(t * (1 - t) / n_check), 1 - 1.0 / n_check)
-
     def ok(x) -> bool:
-        return all((_exact_stat(c, np.asarray(x[j]), level(c)) >= float(c.spec)) if c.metric.higher_is_better
-                   else (_exact_stat(c, np.asarray(x[j]), level(c)) <= float(c.spec)) for j, c in enumerate(p.constraints))
+        return all((_exact_stat(c, np.asarray(x[j]), n_check) >= float(c.spec)) if c.metric.higher_is_better
+                   else (_exact_stat(c, np.asarray(x[j]), n_check) <= float(c.spec)) for j, c in enumerate(p.constraints))
 
     def at(scale):
         return {n: jnp.asarray(direction[n] if n in capped else direction[n] * scale) for n in p.names}
@@ -449,7 +365,7 @@ def _calibrate_and_verify(p: BudgetProblem, direction: dict[str, float], capped:
     if not capped and p.homogeneous:
         # Homogeneity: the statistic of s·T is s times that of T (exact for the empirical quantile).
         x = np.asarray(run(at(1.0), cal))
-        lo = min(float(c.spec) / _exact_stat(c, x[j], level(c)) for j, c in enumerate(p.constraints))
+        lo = min(float(c.spec) / _exact_stat(c, x[j], n_check) for j, c in enumerate(p.constraints))
     else:
         lo, hi = 1e-3, 1e3
         for _ in range(36):  # bisection in log scale (held sources or a non-linear drive break homogeneity)
@@ -459,6 +375,9 @@ def _calibrate_and_verify(p: BudgetProblem, direction: dict[str, float], capped:
             else:
                 hi = mid
     tol = at(lo)
+    if not ok(run(tol, cal)):
+        # The finest scale searched still misses the target: the spec cannot be met this way.
+        result = RESULTS.infeasible
     x = np.asarray(run(tol, ver))
     met = [_met(c, x[j]) for j, c in enumerate(p.constraints)]
     return BudgetResult(tolerances={n: float(v) for n, v in tol.items()}, cost=float(total_cost(p, tol)),
@@ -486,12 +405,14 @@ def optimise_budget(p: BudgetProblem, *, key: int | PRNGKeyArray, n_samples: int
     require_x64()
     k_crn, k_check = jax.random.split(as_key(key))
     draws = common_draws(p, k_crn, n_samples)
-    if any(float(v) > 0 for v in p.minimum.values()):
-        worst = float(jnp.max(_violation(p, metric_samples(p, p.minimum, draws))))
-        if worst > 0:
-            check(RESULTS.infeasible, throw=throw, what=f"optimise_budget: even at the minimum tolerances "
-                  f"{({n: float(v) for n, v in p.minimum.items()})} a constraint is missed by {worst:.4g}")
-            return _failed(p, RESULTS.infeasible)
+    # Feasible at all? At the minimum tolerances, or (none given) at the finest the scale search reaches.
+    finest = {n: (p.minimum[n] if float(p.minimum[n]) > 0 else _BRACKET[0] * p.nominal[n]) for n in p.names}
+    worst = float(jnp.max(_violation(p, metric_samples(p, finest, draws))))
+    if worst > 0:
+        check(RESULTS.infeasible, throw=throw, what=f"optimise_budget: even at the tolerances "
+              f"{({n: float(v) for n, v in finest.items()})} a constraint is missed by {worst:.4g} (the other sources' "
+              "laws alone break it)")
+        return _failed(p, RESULTS.infeasible)
 
     def objective(y, args):
         return _capped_cost(p, tight_tolerances(p, y, draws))
@@ -510,6 +431,7 @@ def optimise_budget(p: BudgetProblem, *, key: int | PRNGKeyArray, n_samples: int
     direction = {n: min(float(tol[n]), float(p.maximum[n])) for n in p.names}
     result = RESULTS.promote(sol.result)
     converged = bool(sol.result == optx.RESULTS.successful)
+    check(result, throw=throw, what="optimise_budget (BFGS on the smoothed cost)")
     return _calibrate_and_verify(p, direction, capped, key=k_check, n_check=n_check, label="optimised", result=result,
                                  converged=converged)
 

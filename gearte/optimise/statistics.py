@@ -1,0 +1,117 @@
+"""The statistics a tolerance budget constrains, as objects: a yield (a quantile) or mean ± kσ.
+
+Each knows its smooth form (for the optimiser: a kernel-smoothed quantile, differentiable in the
+samples), its exact form (for calibration and verification), and how much margin a calibration
+on a finite sample needs.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+
+def smooth_quantile(x: Float[Array, " n"], level: float, width, *, iterations: int = 64) -> Float[Array, ""]:
+    """Kernel-smoothed `level`-quantile of samples `x`: the q with mean σ((q − x_k)/width) = level.
+
+    Differentiable in `x` and in `width` (which may depend on `x`) by the implicit-function
+    theorem: dq = Σ_k σ'_k [dx_k + (q − x_k) dw / w] / Σ_k σ'_k. As width → 0 it tends to the
+    empirical quantile.
+    """
+    xs = jax.lax.stop_gradient(x)
+    width = jnp.asarray(width, dtype=float)
+    ws = jax.lax.stop_gradient(width)
+
+    def residual(q):
+        return jnp.mean(jax.nn.sigmoid((q - xs) / ws)) - level
+
+    def body(_, lh):  # bisection: monotone and safe for any data
+        lo, hi = lh
+        mid = 0.5 * (lo + hi)
+        up = residual(mid) > 0
+        return jnp.where(up, lo, mid), jnp.where(up, mid, hi)
+
+    lo, hi = jax.lax.fori_loop(0, iterations, body, (jnp.min(xs) - 40 * ws, jnp.max(xs) + 40 * ws))
+    q = 0.5 * (lo + hi)
+    s = jax.nn.sigmoid((q - xs) / ws)
+    wk = s * (1 - s)
+    wk = wk / jnp.sum(wk)
+    return q + jnp.sum(wk * (x - xs)) + jnp.sum(wk * (q - xs)) / ws * (width - ws)
+
+
+class AbstractStatistic(eqx.Module):
+    """The statistic a budget constrains (an object, as optimistix passes a norm).
+
+    `lower` says the metric's spec is a lower bound (more is better, e.g. loaded pairs).
+    """
+
+    @abc.abstractmethod
+    def smooth(self, x: Float[Array, " n"], *, lower: bool, width: Float[Array, ""]) -> Float[Array, ""]:
+        """A smooth statistic of samples `x` (`width`: relative smoothing width, for quantiles)."""
+
+    @abc.abstractmethod
+    def exact(self, x: np.ndarray, *, lower: bool, margin_samples: int | None = None) -> float:
+        """The exact statistic of samples `x`; with `margin_samples`, the calibration target that clears the
+        constraint with a safety margin for a fresh sample of that size."""
+
+    @abc.abstractmethod
+    def describe(self) -> str:
+        """One line for reports."""
+
+
+class Yield(AbstractStatistic):
+    """P(metric meets its spec) ≥ `target`: the target-quantile of the metric against the spec."""
+
+    target: float = eqx.field(static=True)
+
+    def __init__(self, target: float = 0.9973):
+        t = float(target)
+        if not 0.5 <= t < 1:
+            raise ValueError(f"Yield.target: a yield in [0.5, 1), got {target!r}")
+        self.target = t
+
+    def smooth(self, x, *, lower, width):
+        level = (1.0 - self.target) if lower else self.target
+        # Width ∝ the mean keeps the statistic positively homogeneous of degree 1, exactly.
+        return smooth_quantile(x, level, width * jnp.mean(jnp.abs(x)) if lower else width * jnp.mean(x))
+
+    def exact(self, x, *, lower, margin_samples=None):
+        t = self.target
+        if margin_samples is not None:
+            # Four standard errors: the calibration and the verification samples each carry one
+            # binomial error, so the verified yield clears the target with ~99.8 % probability.
+            t = min(t + 4 * math.sqrt(t * (1 - t) / margin_samples), 1 - 1.0 / margin_samples)
+        return float(np.quantile(x, 1.0 - t if lower else t))
+
+    def describe(self) -> str:
+        return f"yield ≥ {self.target:g}"
+
+
+class MeanKSigma(AbstractStatistic):
+    """mean + k·σ of the metric against the spec (mean − kσ for a metric where more is better)."""
+
+    k: float = eqx.field(static=True)
+
+    def __init__(self, k: float = 3.0):
+        kk = float(k)
+        if not (math.isfinite(kk) and kk >= 0):
+            raise ValueError(f"MeanKSigma.k: k ≥ 0, got {k!r}")
+        self.k = kk
+
+    def smooth(self, x, *, lower, width):
+        del width
+        return jnp.mean(x) - self.k * jnp.std(x) if lower else jnp.mean(x) + self.k * jnp.std(x)
+
+    def exact(self, x, *, lower, margin_samples=None):
+        del margin_samples
+        sd = np.std(x, ddof=1)
+        return float(np.mean(x) - self.k * sd if lower else np.mean(x) + self.k * sd)
+
+    def describe(self) -> str:
+        return f"mean ± {self.k:g}σ"
