@@ -71,6 +71,10 @@ def test_declares_sources_and_metrics(case):
     assert drive.metrics and all(isinstance(m, gearte.AbstractMetric) and m.name == n for n, m in drive.metrics.items())
     assert drive.accuracy()
     assert isinstance(drive, (gearte.AbstractSinusoidalDrive, gearte.AbstractGridDrive))
+    # The class variables a drive and its metrics must set (class-level declarations of the protocol).
+    assert isinstance(type(drive).type_name, str) and isinstance(type(drive).linear, bool)
+    for m in drive.metrics.values():
+        assert isinstance(m.label, str) and m.quantity in ("angle", "count") and isinstance(m.higher_is_better, bool)
 
 
 def test_zero_errors_give_a_te_without_variation(case):

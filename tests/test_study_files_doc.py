@@ -138,7 +138,7 @@ def test_every_key_a_reader_asks_for_is_documented_and_every_documented_key_is_r
         checked.add(key)
     # Generic tables collect keys over every drive; each documented key must be asked for by some reader.
     generic: dict[str, set[str]] = defaultdict(set)
-    for (dtype, where), keys in probed.items():
+    for (_, where), keys in probed.items():
         generic[where] |= keys
     for (dtype, where), keys in doc.items():
         read = probed.get((dtype, where), set()) if dtype is not None else generic.get(where, set())

@@ -41,7 +41,7 @@ def kind_key(seed: int):
     return jax.random.fold_in(jax.random.fold_in(as_key(seed), 2**32 - 1), 1)
 
 
-def _optimised(study: "Study") -> dict[str, Optimised]:
+def _optimised(study: Study) -> dict[str, Optimised]:
     return {n: s.phase for n, s in study.errors.sources.items() if isinstance(s.phase, Optimised)}
 
 
@@ -50,13 +50,13 @@ class Allocation(AbstractStudyKind):
 
     table = "allocation"
 
-    def check_absent(self, study: "Study") -> None:
+    def check_absent(self, study: Study) -> None:
         optimised = _optimised(study)
         if optimised:
             raise ConfigError(f"[allocation]: phases of {sorted(optimised)} are to be optimised; add an [allocation] table "
                               "(objective = \"worst_case\" | \"expected\" | \"robust\")")
 
-    def read(self, t: Table, study: "Study") -> AllocationSpec:
+    def read(self, t: Table, study: Study) -> AllocationSpec:
         optimised = _optimised(study)
         if not isinstance(study.drive, AbstractSinusoidalDrive):
             raise ConfigError(f"[allocation]: assembly-phase allocation needs a drive with phases (sinusoidal TE); "
@@ -99,12 +99,12 @@ class Allocation(AbstractStudyKind):
             seed_rule=seed_rule,
         )
 
-    def check_together(self, study: "Study") -> None:
+    def check_together(self, study: Study) -> None:
         if "allocation" in study.kinds and "budget" in study.kinds:
             raise ConfigError("[budget]: give the assembly rule as concrete phases (rule = \"relative\" or \"fixed\") in a budget "
                               "study; optimise the rule in its own study first")
 
-    def run(self, study: "Study", spec: AllocationSpec, *, progress: bool | None) -> KindOutcome:
+    def run(self, study: Study, spec: AllocationSpec, *, progress: bool | None) -> KindOutcome:
         key = kind_key(study.seed)
         k_opt, k_seed = jax.random.split(key)
         p = rule_problem(study.drive, study.errors, adjust=spec.adjust, datum=spec.datum,  # pyright: ignore[reportArgumentType]
@@ -113,7 +113,7 @@ class Allocation(AbstractStudyKind):
                             n_check=spec.check_samples, throw=False)
         found = {n: float(v) for n, v in res.offsets.items()}
         sym = {n: s.symbol for n, s in study.drive.error_sources.items()}
-        to_unit = lambda x: float(angle_from_rad(float(x), study.unit))  # noqa: E731
+        to_unit = lambda x: float(angle_from_rad(float(x), study.unit))
         u = study.unit
         entry: dict[str, Any] = {
             "objective": spec.objective,
@@ -168,11 +168,11 @@ class Allocation(AbstractStudyKind):
         return KindOutcome(study=resolved, key="allocation", summary=entry, report=lambda s: _report(study, s), finish=finish)
 
 
-def _te_study(study: "Study", model: ErrorModel) -> TEStudy:
+def _te_study(study: Study, model: ErrorModel) -> TEStudy:
     return TEStudy(study.drive, model, metric=study.metric)
 
 
-def _with_rule(study: "Study", spec: AllocationSpec, offsets: dict[str, float]) -> "Study":
+def _with_rule(study: Study, spec: AllocationSpec, offsets: dict[str, float]) -> Study:
     """The study with its optimised phases replaced by a concrete rule (offsets in rad)."""
     sources = dict(study.errors.sources)
     for name, mode in spec.adjust.items():
@@ -183,7 +183,7 @@ def _with_rule(study: "Study", spec: AllocationSpec, offsets: dict[str, float]) 
     return dataclasses.replace(study, errors=ErrorModel(sources, study.errors.specs), kinds=kinds)
 
 
-def _report(study: "Study", s: dict) -> list[str]:
+def _report(study: Study, s: dict) -> list[str]:
     a = s["allocation"]
     sym = UNIT_SYMBOLS[study.unit]
     u = study.unit

@@ -6,7 +6,6 @@ import dataclasses
 from typing import TYPE_CHECKING, Any
 
 import jax
-import numpy as np
 
 from ..core.metrics import AbstractMetric
 from ..core.schema import ConfigError, Table
@@ -93,7 +92,7 @@ def _cost_model(t: Table, nominal: float):
         raise ConfigError(f"{t.where}: {e}") from None
 
 
-def _constraint(t: Table, study: "Study", *, default_metric: AbstractMetric) -> ConstraintSpec:
+def _constraint(t: Table, study: Study, *, default_metric: AbstractMetric) -> ConstraintSpec:
     offered = study.drive.metrics
     metric = offered[t.string("metric", default_metric.name, choices=tuple(offered))] if t.has("metric") else default_metric
     spec = t.number("spec", positive=True)
@@ -109,7 +108,7 @@ class Budget(AbstractStudyKind):
 
     table = "budget"
 
-    def read(self, t: Table, study: "Study") -> BudgetSpec:
+    def read(self, t: Table, study: Study) -> BudgetSpec:
         specs = study.drive.error_sources
         if t.has("sources"):
             raw = t.get("sources")
@@ -180,7 +179,7 @@ class Budget(AbstractStudyKind):
                           pareto_specs=tuple(float(x) for x in pareto),
                           compare_random_assembly=t.boolean("compare_random_assembly", True))
 
-    def run(self, study: "Study", spec: BudgetSpec, *, progress: bool | None) -> KindOutcome:
+    def run(self, study: Study, spec: BudgetSpec, *, progress: bool | None) -> KindOutcome:
         b = spec
         u = study.unit
         key = kind_key(study.seed)
@@ -199,7 +198,7 @@ class Budget(AbstractStudyKind):
         grades = {n: _grade(b.grades[n], best.tolerances[n]) for n in b.grades}
         c0 = b.constraints[0]
         first = next(iter(base.tolerances))
-        show = (lambda x: float(angle_from_rad(x, u))) if c0.metric.quantity == "angle" else float  # noqa: E731
+        show = (lambda x: float(angle_from_rad(x, u))) if c0.metric.quantity == "angle" else float
         entry: dict[str, Any] = {
             "constraint": c0.constraint,
             f"spec_{u}": c0.spec,
@@ -256,7 +255,7 @@ class Budget(AbstractStudyKind):
                            report=lambda s: _report(study, s))
 
 
-def _scaled_study(study: "Study", b: BudgetSpec, tolerances: dict[str, float]) -> "Study":
+def _scaled_study(study: Study, b: BudgetSpec, tolerances: dict[str, float]) -> Study:
     """The study with every budgeted law scaled from its nominal tolerance to `tolerances`, about its centre."""
     sources = dict(study.errors.sources)
     for n, t in tolerances.items():
@@ -276,7 +275,7 @@ def _grade(spec: dict, tol_um: float):
         return f"none ({e})"
 
 
-def _report(study: "Study", s: dict) -> list[str]:
+def _report(study: Study, s: dict) -> list[str]:
     b = s["budget"]
     u = study.unit
     sym = UNIT_SYMBOLS[u]

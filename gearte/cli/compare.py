@@ -36,7 +36,7 @@ def compare_runs(run_dirs: list[str | Path], out: str | Path) -> dict:
     sym = UNIT_SYMBOLS[unit]
     base = runs[0][1]["te"]["mean"]
     rows = []
-    for d, summ, vals in runs:
+    for d, summ, _ in runs:
         te = summ["te"]
         rows.append({"run": str(d), "name": summ["study"]["name"], "title": summ["study"]["title"], "n": te["n"], "min": te["min"],
                      "max": te["max"], "mean": te["mean"], "std": te["std"], "p99.73": te["percentiles"]["99.73"],

@@ -326,7 +326,7 @@ def _magnitude(t: Table, tol: float | None) -> AbstractLaw:
 def _value(t: Table, spec: SourceSpec, tol: float | None, *, pattern_ok: bool = True) -> AbstractLaw:
     """The law of a signed deviation, in the source's unit (µm, or an angle)."""
     law = t.string("law", choices=VALUE_LAWS)
-    v = lambda stem, *a, **k: _length_or_angle(t, stem, spec, *a, **k)  # noqa: E731
+    v = lambda stem, *a, **k: _length_or_angle(t, stem, spec, *a, **k)
     if law == "fixed":
         return Fixed(v("value"))
     if law == "random_angle":

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-from typing import TYPE_CHECKING, Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ class Finish:
 
     values: np.ndarray
     typical: int
-    trace: Callable[["Study", int], tuple[np.ndarray, np.ndarray]]
+    trace: Callable[[Study, int], tuple[np.ndarray, np.ndarray]]
 
 
 @dataclasses.dataclass
@@ -35,7 +36,7 @@ class KindOutcome:
     its figures, a report section (Markdown lines, given the final summary), and an optional
     step after the study's own Monte Carlo."""
 
-    study: "Study"
+    study: Study
     key: str
     summary: dict
     figures: list[Figure] = dataclasses.field(default_factory=list)
@@ -49,17 +50,17 @@ class AbstractStudyKind(abc.ABC):
     table: str
 
     @abc.abstractmethod
-    def read(self, t: Table, study: "Study") -> Any:
+    def read(self, t: Table, study: Study) -> Any:
         """Validate the kind's table (every key; the caller refuses unknown ones) into a spec."""
 
-    def check_absent(self, study: "Study") -> None:
+    def check_absent(self, study: Study) -> None:
         """Raise a ConfigError if the study needs this kind's table but has none."""
         del study
 
-    def check_together(self, study: "Study") -> None:
+    def check_together(self, study: Study) -> None:
         """Raise a ConfigError if this kind cannot run with the other kinds present."""
         del study
 
     @abc.abstractmethod
-    def run(self, study: "Study", spec: Any, *, progress: bool | None) -> KindOutcome:
+    def run(self, study: Study, spec: Any, *, progress: bool | None) -> KindOutcome:
         """Run the kind before the study's Monte Carlo."""

@@ -18,10 +18,10 @@ class Modification(AbstractStudyKind):
 
     table = "modification"
 
-    def read(self, t: Table, study: "Study") -> ModificationSpec:
+    def read(self, t: Table, study: Study) -> ModificationSpec:
         return ModificationSpec.from_table(t, study.drive)
 
-    def run(self, study: "Study", spec: ModificationSpec, *, progress: bool | None) -> KindOutcome:
+    def run(self, study: Study, spec: ModificationSpec, *, progress: bool | None) -> KindOutcome:
         del progress
         drive = study.drive
         # An infeasible spec is reported (the best start, marked infeasible), not raised.

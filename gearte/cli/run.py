@@ -9,6 +9,7 @@ temporary folder that replaces the results folder only when complete.
 from __future__ import annotations
 
 import datetime as _dt
+import importlib
 import math
 import platform
 import time
@@ -20,9 +21,10 @@ import numpy as np
 import optimistix
 
 from .. import __version__
+from ..core.metrics import AbstractMetric
+from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import AbstractStudyContext, Figure
 from ..studies.montecarlo import PERCENTILES, TEStudy, as_key, monte_carlo, statistics
-from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from . import plots
 from .config import Study
 from .io import atomic_output_dir, write_json
@@ -62,11 +64,12 @@ class _RunSample(equinox.Module):
     """One sample of a run: the study's metric and the drive's per-sample outputs, from one response."""
 
     study: TEStudy
+    metric: AbstractMetric
 
     def __call__(self, key):
         errors = self.study.errors.sample(key)
         response = self.study.drive.response(errors)
-        return self.study.metric(self.study.drive, response), self.study.drive.sample_outputs(errors, response)
+        return self.metric(self.study.drive, response), self.study.drive.sample_outputs(errors, response)
 
     def bytes_per_sample(self) -> int:
         return self.study.bytes_per_sample()
@@ -78,9 +81,12 @@ def _trace_in_unit(study: Study, index: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _draw(figure: Figure, folder: Path) -> None:
-    fn = getattr(plots, figure.plot, None)
+    """Draw a declared figure: `plot` names a function of `gearte.cli.plots`, or ``"module:function"`` (a drive's
+    own plots module beside it, e.g. ``"gearte.drives.cycloid_pin_plots:rotation_error"``)."""
+    module, _, name = figure.plot.rpartition(":")
+    fn = getattr(importlib.import_module(module) if module else plots, name, None)
     if fn is None:
-        raise ValueError(f"figure {figure.filename}: gearte.cli.plots has no plot {figure.plot!r}")
+        raise ValueError(f"figure {figure.filename}: no plot function {figure.plot!r}")
     fn(**figure.data, path=folder / figure.filename)
 
 
@@ -94,7 +100,7 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
             outcome = kind.run(study, study.kinds[kind.table], progress=progress)
             outcomes.append(outcome)
             study = outcome.study
-    mc = monte_carlo(_RunSample(TEStudy(study.drive, study.errors, metric=study.metric)), key=study.seed, n_samples=study.samples,
+    mc = monte_carlo(_RunSample(TEStudy(study.drive, study.errors, metric=study.metric), study.metric), key=study.seed, n_samples=study.samples,
                      chunk_size=study.chunk_size, progress=progress, desc=study.name)
     values_rad, outputs = mc.values
     angle = study.metric.quantity == "angle"
@@ -135,7 +141,7 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
         },
         "timing_s": {"monte_carlo": mc.seconds, "total": None},
         "versions": versions(),
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
     }
     figures: list[Figure] = []
     for o in outcomes:

@@ -28,7 +28,7 @@ class Sensitivity(AbstractStudyKind):
 
     table = "sensitivity"
 
-    def read(self, t: Table, study: "Study") -> SensitivitySpec:
+    def read(self, t: Table, study: Study) -> SensitivitySpec:
         n = t.integer("pathwise_samples", 64, minimum=1)
         offered = study.drive.metrics
         names = t.get("pathwise_metrics", [study.metric.name])
@@ -41,7 +41,7 @@ class Sensitivity(AbstractStudyKind):
                                   + (f" (did you mean {hint[0]!r}?)" if hint else "") + f"; use some of {list(offered)}")
         return SensitivitySpec(n, tuple(names))
 
-    def run(self, study: "Study", spec: SensitivitySpec, *, progress: bool | None) -> KindOutcome:
+    def run(self, study: Study, spec: SensitivitySpec, *, progress: bool | None) -> KindOutcome:
         del progress
         metrics = study.drive.metrics
         res = pathwise_sensitivities(study.drive, study.errors, [metrics[m] for m in spec.pathwise_metrics], key=study.seed,

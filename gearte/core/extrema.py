@@ -15,7 +15,6 @@ For objectives that an optimiser should see as smooth, use `smooth_peak`.
 
 from __future__ import annotations
 
-import math
 from fractions import Fraction
 
 import equinox as eqx
@@ -25,8 +24,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .signal import TESignal, evaluate
-
-_TWO_PI = 2.0 * math.pi
+from .units import TWO_PI as _TWO_PI
 
 
 class Extrema(eqx.Module):

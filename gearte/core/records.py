@@ -25,8 +25,8 @@ Records are plain NumPy arrays: this is post-processing, not part of the jit-com
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from fractions import Fraction
-from typing import Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -34,8 +34,8 @@ import numpy as np
 from jaxtyping import ArrayLike
 
 from .signal import TESignal, evaluate
+from .units import TWO_PI as _TWO_PI
 
-_TWO_PI = 2.0 * math.pi
 WINDOWS = ("hann", "rectangular")
 
 

@@ -13,6 +13,7 @@ import math
 import re
 from typing import Any
 
+
 class ConfigError(ValueError):
     """A configuration file is invalid; the message names the field and the fix."""
 
@@ -100,7 +101,7 @@ class Table:
             raise ConfigError(f"{self.where}: missing `{stem}_deg` (degrees) or `{stem}_rad` (radians)")
         return default
 
-    def table(self, key: str, default: Any = _MISSING) -> "Table":
+    def table(self, key: str, default: Any = _MISSING) -> Table:
         v = self.get(key, default)
         if v is default and default is not _MISSING:
             return v

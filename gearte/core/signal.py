@@ -15,8 +15,8 @@ which is what the exact metrics work on.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from fractions import Fraction
-from typing import Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -162,7 +162,7 @@ def to_signal(components: Components) -> TESignal:
     return TESignal(offset=offset, cos_coef=stack(cos_terms), sin_coef=stack(sin_terms), orders=orders, fundamental=f0)
 
 
-def evaluate(signal: TESignal, theta: ArrayLike) -> Float[Array, "..."]:
+def evaluate(signal: TESignal, theta: ArrayLike) -> Float[Array, ...]:
     """TE (rad) at input angles `theta` (rad). Broadcasts ``signal`` batch dims against ``theta``.
 
     For a batched signal of shape ``(B,)`` and theta of shape ``(T,)`` pass

@@ -32,10 +32,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .extrema import _basis, _candidates, _derivatives, grid_size, _grid_values, extrema
+from .extrema import _basis, _candidates, _derivatives, _grid_values, extrema, grid_size
 from .signal import TESignal, evaluate
-
-_TWO_PI = 2.0 * math.pi
+from .units import TWO_PI as _TWO_PI
 
 
 class TwoScaleExtrema(eqx.Module):

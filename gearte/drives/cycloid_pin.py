@@ -110,7 +110,7 @@ from jaxtyping import Array, Float
 
 from ..core.metrics import AbstractMetric
 from ..core.schema import ConfigError
-from ..core.units import TWO_PI
+from ..core.units import ARCSEC_PER_RAD, TWO_PI
 from ..core.validate import as_float, as_int
 from .cycloid_pin_contact import (
     Clearances,
@@ -363,7 +363,7 @@ class CycloidPin(AbstractGridDrive):
                 ("eccentricity a", f"{float(self.eccentricity):g} mm"), ("K_1 = a z_b / R_z", f"{float(self.K1):.6g}"),
                 ("wheel R_Z (shift ΔR_Z)", f"{float(self.wheel_pin_circle_radius):.6g} mm ({float(m.shift):+.6g} mm)"),
                 ("wheel r_Z (equidistant Δr_Z)", f"{float(self.wheel_pin_radius):.6g} mm ({float(m.equidistant):+.6g} mm)"),
-                ("rotation modification δ", f"{float(m.rotation) * 180 * 3600 / math.pi:.6g}″"),
+                ("rotation modification δ", f"{float(m.rotation) * ARCSEC_PER_RAD:.6g}″"),
                 ("radial clearance at root and tip Δr_Z − ΔR_Z", f"{float(self.radial_clearance()):.6g} mm")]
 
 

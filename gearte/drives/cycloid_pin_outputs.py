@@ -305,24 +305,24 @@ def study_outputs(drive: CycloidPin, context: AbstractStudyContext) -> StudyOutp
     n_out = theoretical_pairs(drive)
     pitch, lm = c["pitch"], c["lm"]
     figures = [
-        Figure("clearance_per_pin.png", "cycloid_clearance_per_pin",
+        Figure("clearance_per_pin.png", "gearte.drives.cycloid_pin_plots:clearance_per_pin",
                dict(tangential_mm=c["arc"], normal_mm=c["normal"], on_driving=c["drv"], budget_mm=budget, contact_pin=c["ci"] + 1,
                     reverse_contact_pin=c["ri"] + 1,
                     title=f"reference reducer: clearances at θ_T = {math.degrees(theta0):.4g}°; "
                           f"{c['n_loaded']} of {n_out} driving pairs within {budget:g} mm"),
                "clearance of every pin at the input position"),
-        Figure("clearance_vs_input.png", "cycloid_clearance_vs_input",
+        Figure("clearance_vs_input.png", "gearte.drives.cycloid_pin_plots:clearance_vs_input",
                dict(input_deg=np.degrees(np.asarray(pitch.input_angle)), tangential_mm=np.asarray(pitch.tangential_arc),
                     normal_mm=np.asarray(pitch.normal_clearance),
                     pins=[j + 1 for j in range(zb) if bool(np.all(np.asarray(pitch.on_driving_flank)[:, j]))], budget_mm=budget,
                     title="reference reducer: driving-flank pairs over one pin pitch (cf. Yao & Liang 2001, figures 3–8)"),
                "clearance against the input angle"),
-        Figure("rotation_error.png", "cycloid_rotation_error",
+        Figure("rotation_error.png", "gearte.drives.cycloid_pin_plots:rotation_error",
                dict(input_rev=np.asarray(c["rev_angles"]) / (2 * math.pi), forward_arcsec=c["te_f"], reverse_arcsec=c["te_r"],
                     title=f"reference reducer: rotation error over {drive.analysis.sweep_revolutions} input revolution(s), "
                           f"lost motion {lm.min():.2f}′ … {lm.max():.2f}′"),
                "rotation error"),
-        Figure("monte_carlo.png", "cycloid_distributions",
+        Figure("monte_carlo.png", "gearte.drives.cycloid_pin_plots:distributions",
                dict(series=[("lost motion, max over the cycle (′)", u["lost_motion_max"] * ARCMIN_PER_RAD, "′"),
                             ("rotation error p-p (″)", u["rotation_error_p2p"] * ARCSEC_PER_RAD, "″"),
                             (f"loaded pairs at θ_T (of {n_out})", u["loaded_pairs"], "")],

@@ -7,8 +7,9 @@ output TE is ``gain`` (rad/µm) times their sum.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from fractions import Fraction
-from typing import ClassVar, Mapping, Sequence
+from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -77,7 +78,7 @@ class ExplicitDrive(AbstractSinusoidalDrive):
         return {t.source: SourceSpec(t.source, "eccentricity") for t in self.terms}
 
     @classmethod
-    def from_table(cls, table: Table) -> "ExplicitDrive":
+    def from_table(cls, table: Table) -> ExplicitDrive:
         """``[drive] type = "explicit"``: gain_rad_per_um, optional name, and a list of ``[[drive.terms]]``
         (source, frequency as a number or a fraction string, optional phase_sign ±1, offset_deg/_rad, scale)."""
         t = table

@@ -121,8 +121,8 @@ def study_outputs(drive: HarmonicDrive, context: AbstractStudyContext) -> StudyO
               "![Monte Carlo against the estimate](estimate.png)", "",
               f"Extrema: {summary['extrema_method']['method']}; the certified bound on the error of any sample's value is "
               f"{gap_max:.2e}{sym} (max over the batch). Per output revolution: {drive.output_rev_note()}.", ""]
-    figures.append(Figure("estimate.png", "histogram_with_estimates",
-                          dict(values=values, percentiles={"50": pct["50"], "99.73": p9973}, unit=unit, metric=metric,
+    figures.append(Figure("estimate.png", "gearte.drives.harmonic_plots:histogram_with_estimates",
+                          dict(values=values, percentiles={"50": pct["50"], "99.73": p9973}, unit=unit, metric=context.metric.label,
                                title="Monte Carlo of the batch against Liu's estimate, eqs. (7)–(8)",
                                estimates=[(est_u, f"estimate Δφ (eq. 8) = {est_u:.2f}{sym}"),
                                           (2 * est_u, f"2Δφ (the ±Δφ band) = {2 * est_u:.2f}{sym}")]),
@@ -258,7 +258,7 @@ def _typical_unit(drive: HarmonicDrive, errs: dict, typical: int, unit: str) -> 
     summary["beats"] = beats
 
     step = max(1, len(rec.time) // 200_000)
-    figures.append(Figure("record.png", "record_with_envelope", dict(
+    figures.append(Figure("record.png", "gearte.drives.harmonic_plots:record_with_envelope", dict(
         time_s=rec.time[::step], te=to_unit(rec.te[::step]), unit=unit,
         envelopes=[(rec.time[::step], to_unit(env_model[::step]), "CS + FS envelope (model)"),
                    (rec.time[k0:k1:step], to_unit(env_rec[k0:k1:step]), "CS + FS envelope (record, analytic signal)")],
@@ -270,7 +270,7 @@ def _typical_unit(drive: HarmonicDrive, errs: dict, typical: int, unit: str) -> 
     marks = [(e["freq_cpm"], to_unit(e["amplitude_arcsec"] / ARCSEC_PER_RAD),
               f"{e['freq_cpm']:.2f} cpm {CLASSES[e['class']]['short'] if e['class'] else ''}", e["kind"] == "line") for e in found]
     mid, half = 0.5 * (f_cs + f_fs), 0.5 * abs(f_fs - f_cs) + 12 * rec.resolution_cpm
-    figures.append(Figure("spectrum.png", "labelled_spectrum", dict(
+    figures.append(Figure("spectrum.png", "gearte.drives.harmonic_plots:labelled_spectrum", dict(
         freq_cpm=spec.freq_cpm, amplitude=to_unit(spec.amplitude), lines=marks, unit=unit,
         title=f"Spectrum of the record of unit #{typical} (Hann window, {rec.resolution_cpm:.3f} cpm bins)",
         zooms=[(0.0, 2.5 * n), (round(mid - half, 1), round(mid + half, 1))],

@@ -23,11 +23,11 @@ paper's example are at |ω_p − ω_c| = 7/24 ω_s, not the 11/24 printed in its
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from fractions import Fraction
-from typing import Any, ClassVar, Mapping, Sequence
+from typing import Any, ClassVar
 
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
 
 from ..core.schema import ConfigError, Table
@@ -187,7 +187,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
                 for name, (sym, per_planet) in SOURCES.items()}
 
     @classmethod
-    def from_table(cls, table: Table) -> "Planetary2KH":
+    def from_table(cls, table: Table) -> Planetary2KH:
         """``[drive] type = "planetary_2kh"``: z_sun, z_planet, z_ring, module_mm, n_planets; optional
         pressure_angle_deg/_rad (20°), planet_angles_deg/_rad, centre_distance_mm, input ("sun"),
         output ("carrier"), fixed ("ring"), coupling ("single_path" or "load_sharing")."""

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-from typing import TYPE_CHECKING, Any, ClassVar, Literal, Mapping, Self
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, ClassVar, Literal, Self
 
 import equinox as eqx
 import jax
@@ -100,10 +101,12 @@ Errors = Mapping[str, Any]  # source name → Eccentricity (eccentricity sources
 
 @dataclasses.dataclass(frozen=True)
 class Figure:
-    """A plot a study declares, drawn by the command line (`gearte.cli.plots`): the numerics never import matplotlib.
+    """A plot a study declares, drawn by the command line: the numerics never import matplotlib.
 
-    `plot` names a function of `gearte.cli.plots`; `data` are its keyword arguments (NumPy arrays,
-    numbers, strings); `filename` is the PNG written in the results folder.
+    `plot` names a function of `gearte.cli.plots`, or ``"module:function"`` for a drive's own plots
+    module beside it (e.g. ``"gearte.drives.cycloid_pin_plots:rotation_error"``, imported only when
+    drawing); it is called with ``**data, path=folder / filename``. `data` are its keyword arguments
+    (NumPy arrays, numbers, strings); `filename` is the PNG written in the results folder.
     """
 
     filename: str
@@ -194,7 +197,7 @@ class AbstractDrive(eqx.Module):
 
     @classmethod
     @abc.abstractmethod
-    def from_table(cls, table: "Table") -> Self:
+    def from_table(cls, table: Table) -> Self:
         """Build the drive from its study-file table ``[drive]`` (read every key; unknown keys are refused by the caller)."""
 
     def describe(self) -> list[tuple[str, str]]:

@@ -18,7 +18,8 @@ Optimisation runs on smooth surrogates with optimistix (BFGS, multi-start under
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -32,12 +33,11 @@ from ..core.metrics import AbstractMetric, Peak, PeakToPeak
 from ..core.precision import require_x64
 from ..core.signal import Components, to_signal
 from ..core.solution import RESULTS, check
+from ..core.units import TWO_PI as _TWO_PI
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
 from ..studies.errors import ErrorModel
 from ..studies.laws import FixedPhase, RelativePhase, UniformPhase
 from ..studies.montecarlo import as_key, monte_carlo
-
-_TWO_PI = 2.0 * math.pi
 
 
 def _starts_result(results, best) -> tuple[int, Any]:

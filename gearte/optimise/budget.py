@@ -31,9 +31,9 @@ How it is solved:
 
 from __future__ import annotations
 
-import abc
 import math
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import equinox as eqx
 import jax

@@ -23,23 +23,22 @@ from __future__ import annotations
 import abc
 import math
 import numbers
-from typing import Mapping
+from collections.abc import Mapping
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..standards.iso1328 import GRADES, check_standard, grade_for_tolerance, iso1328_tolerance
 from ..core.validate import as_float, is_traced
+from ..standards.iso1328 import GRADES, check_standard, grade_for_tolerance, iso1328_tolerance
 
 
 def _coef(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
     return as_float(name, value, positive=positive, nonnegative=nonnegative, hint="a cost cannot be negative")
 
 
-def _tolerance(T: ArrayLike, throw: bool) -> Float[Array, "..."]:
+def _tolerance(T: ArrayLike, throw: bool) -> Float[Array, ...]:
     """T as a float array; a non-positive or non-finite tolerance is an error."""
     if is_traced(T):
         traced = jnp.asarray(T, dtype=float)
@@ -56,7 +55,7 @@ class AbstractCostModel(eqx.Module):
     """Cost of holding an error source to tolerance T, µm; decreasing in T."""
 
     @abc.abstractmethod
-    def __call__(self, T: ArrayLike, *, throw: bool = True) -> Float[Array, "..."]:
+    def __call__(self, T: ArrayLike, *, throw: bool = True) -> Float[Array, ...]:
         """Cost at tolerance `T` µm (> 0), elementwise.
 
         A non-positive or non-finite concrete `T` raises `ValueError`; under `jit`,
@@ -84,7 +83,7 @@ class Reciprocal(AbstractCostModel):
         self.b = jnp.asarray(_coef("Reciprocal.b", b, positive=True), dtype=float)
 
     @classmethod
-    def normalised(cls, T_ref: float) -> "Reciprocal":
+    def normalised(cls, T_ref: float) -> Reciprocal:
         """c = T_ref / T: cost 1 at `T_ref` µm, doubling when the tolerance halves."""
         return cls(0.0, _coef("T_ref", T_ref, positive=True))
 
@@ -110,7 +109,7 @@ class ReciprocalSquare(AbstractCostModel):
         self.b = jnp.asarray(_coef("ReciprocalSquare.b", b, positive=True), dtype=float)
 
     @classmethod
-    def normalised(cls, T_ref: float) -> "ReciprocalSquare":
+    def normalised(cls, T_ref: float) -> ReciprocalSquare:
         """c = (T_ref / T)²: cost 1 at `T_ref` µm, four times as much when the tolerance halves."""
         t = _coef("T_ref", T_ref, positive=True)
         return cls(0.0, t * t)
@@ -140,7 +139,7 @@ class Exponential(AbstractCostModel):
         self.k = jnp.asarray(_coef("Exponential.k", k, positive=True), dtype=float)
 
     @classmethod
-    def normalised(cls, T_ref: float, *, k: float | None = None) -> "Exponential":
+    def normalised(cls, T_ref: float, *, k: float | None = None) -> Exponential:
         """c = e^(−k(T − T_ref)): cost 1 at `T_ref` µm; `k` (1/µm) defaults to 1/T_ref."""
         t = _coef("T_ref", T_ref, positive=True)
         kk = 1.0 / t if k is None else _coef("Exponential.k", k, positive=True)
@@ -168,7 +167,7 @@ class Power(AbstractCostModel):
         self.k = jnp.asarray(_coef("Power.k", k, positive=True), dtype=float)
 
     @classmethod
-    def normalised(cls, T_ref: float, *, k: float = 1.0) -> "Power":
+    def normalised(cls, T_ref: float, *, k: float = 1.0) -> Power:
         """c = (T_ref / T)^k: cost 1 at `T_ref` µm."""
         t = _coef("T_ref", T_ref, positive=True)
         kk = _coef("Power.k", k, positive=True)
@@ -267,7 +266,7 @@ class GradeTable(AbstractCostModel):
         self.face_width = None if face_width is None else float(face_width)
         self.teeth = None if teeth is None else int(teeth)
 
-    def grade(self, T: ArrayLike, *, throw: bool = True) -> Float[Array, "..."]:
+    def grade(self, T: ArrayLike, *, throw: bool = True) -> Float[Array, ...]:
         """Continuous grade of the tolerance `T` µm for this gear and quantity."""
         return grade_for_tolerance(_tolerance(T, throw), quantity=self.quantity, standard=self.standard,
                                    module=self.module, diameter=self.diameter, face_width=self.face_width,

@@ -34,7 +34,6 @@ from __future__ import annotations
 import math
 import numbers
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -211,7 +210,7 @@ def iso1328_tolerance(
     face_width: float | None = None,
     grade: ArrayLike,
     teeth: int | None = None,
-) -> Float[Array, "..."]:
+) -> Float[Array, ...]:
     """Unrounded tolerance of one quantity at a continuous grade (for optimisers).
 
     T(Q) = T₅ · 2^((Q − 5)/2), with T₅ the unrounded grade-5 value of the standard's
@@ -308,7 +307,7 @@ def grade_for_tolerance(
     diameter: float,
     face_width: float | None = None,
     teeth: int | None = None,
-) -> Float[Array, "..."]:
+) -> Float[Array, ...]:
     """The continuous grade whose unrounded tolerance is `value_um`: the inverse of `iso1328_tolerance`.
 
     Q = 5 + 2 log₂(T / T₅), T₅ the unrounded grade-5 value. Not clamped: a tolerance finer
@@ -377,7 +376,7 @@ def nearest_grade(
                      f"({finest:g} µm for this gear); no grade meets it")
 
 
-def eccentricity_from_runout(F_r_um: ArrayLike) -> Float[Array, "..."]:
+def eccentricity_from_runout(F_r_um: ArrayLike) -> Float[Array, ...]:
     """Eccentricity (µm) from a radial run-out (µm): e = F_r / 2.
 
     Run-out is measured as the radial range of a probe over one turn, which an eccentric

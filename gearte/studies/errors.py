@@ -12,7 +12,8 @@ splits it into a magnitude key and a phase key, a deviation uses it as it is.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -120,7 +121,7 @@ class ErrorModel(eqx.Module):
         """Instances per source."""
         return {n: s.count for n, s in self.specs.items()}
 
-    def replace(self, **sources: ErrorSource) -> "ErrorModel":
+    def replace(self, **sources: ErrorSource) -> ErrorModel:
         """A copy with some sources drawn otherwise."""
         return ErrorModel({**self.sources, **sources}, self.specs)
 

@@ -46,14 +46,14 @@ class AbstractLaw(eqx.Module):
     """Law of an error value (µm, or rad for angles): ``sample(key, shape)``."""
 
     @abc.abstractmethod
-    def sample(self, key: PRNGKeyArray, shape: tuple[int, ...]) -> Float[Array, "..."]:
+    def sample(self, key: PRNGKeyArray, shape: tuple[int, ...]) -> Float[Array, ...]:
         """Draw values of the given shape."""
 
     @abc.abstractmethod
     def describe(self, unit: str = "µm") -> str:
         """One line for reports."""
 
-    def scaled(self, factor: float, *, about_centre: bool = False) -> "AbstractLaw":
+    def scaled(self, factor: float, *, about_centre: bool = False) -> AbstractLaw:
         """The law of the draws scaled by `factor` (a tolerance T/T_nominal): about 0, or about its centre.
 
         About 0 every parameter is multiplied (a magnitude law: x → f·x); about the centre c every
@@ -73,7 +73,7 @@ class AbstractValueLaw(AbstractLaw):
     """A law of a scalar value, with its inverse CDF and the value its spread is centred on."""
 
     @abc.abstractmethod
-    def ppf(self, u: Array) -> Float[Array, "..."]:
+    def ppf(self, u: Array) -> Float[Array, ...]:
         """Inverse CDF at probabilities `u` (the map `sample` applies to a uniform draw)."""
 
     @abc.abstractmethod
@@ -137,7 +137,7 @@ class Uniform(AbstractValueLaw):
         self.low, self.high, self.symmetric = jnp.asarray(lo), jnp.asarray(hi), bool(symmetric)
 
     @classmethod
-    def centred(cls, half_width: ArrayLike, centre: ArrayLike = 0.0) -> "Uniform":
+    def centred(cls, half_width: ArrayLike, centre: ArrayLike = 0.0) -> Uniform:
         """Uniform on `centre` ± `half_width` (half_width ≥ 0): a tolerance band."""
         h = _finite("Uniform.half_width", half_width, nonnegative=True)
         c = _finite("Uniform.centre", centre)
@@ -205,7 +205,7 @@ class Normal(AbstractValueLaw):
     def banded(self) -> bool:
         return True
 
-    def scaled(self, factor: float, *, about_centre: bool = False) -> "Normal":
+    def scaled(self, factor: float, *, about_centre: bool = False) -> Normal:
         if about_centre:
             return Normal(self.mean, self.std * factor)
         return Normal(self.mean * factor, self.std * factor)
@@ -412,7 +412,7 @@ class Sinusoid(AbstractLaw):
         k = jnp.arange(1, n + 1, dtype=float)
         return amp * jnp.sin(TWO_PI * self.order * k / n + ph)
 
-    def scaled(self, factor: float, *, about_centre: bool = False) -> "Sinusoid":
+    def scaled(self, factor: float, *, about_centre: bool = False) -> Sinusoid:
         # A pattern's tolerance is its amplitude's.
         return Sinusoid(self.amplitude.scaled(factor, about_centre=about_centre), self.phase, order=self.order)  # pyright: ignore[reportArgumentType]
 

@@ -15,14 +15,14 @@ from __future__ import annotations
 import math
 import sys
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
-
 from tqdm import tqdm
 
 from ..core.metrics import AbstractMetric
@@ -88,7 +88,7 @@ class TEStudy(eqx.Module):
         """Alias of `response` for sinusoidal drives: the TE signal of the sample drawn with `key`."""
         return self.response(key)
 
-    def __call__(self, key: PRNGKeyArray) -> Float[Array, "..."]:
+    def __call__(self, key: PRNGKeyArray) -> Float[Array, ...]:
         r = self.response(key)
         if isinstance(self.metric, tuple):
             return jnp.stack([m(self.drive, r) for m in self.metric])
@@ -133,7 +133,7 @@ class MonteCarloResult(eqx.Module):
 
 
 def monte_carlo(
-    fn: Callable[[PRNGKeyArray], Array],
+    fn: Callable[[PRNGKeyArray], Any],
     *,
     key: int | PRNGKeyArray,
     n_samples: int = DEFAULT_SAMPLES,

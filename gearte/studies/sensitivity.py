@@ -37,37 +37,26 @@ above 1); `confidence_level` adds scipy's bootstrap intervals for the per-input 
 from __future__ import annotations
 
 import math
-from typing import Mapping
+import warnings
+from collections.abc import Mapping
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.special import ndtr, ndtri
 from jaxtyping import Array, Float, PRNGKeyArray
+from scipy import stats
 
 from ..core.metrics import AbstractMetric
 from ..core.precision import require_x64
+from ..core.units import TWO_PI as _TWO_PI
 from ..drives.protocol import AbstractDrive, Eccentricity
 from .errors import ErrorModel
 from .laws import AbstractValueLaw, FixedPhase, Optimised, RelativePhase, UniformPhase
 from .montecarlo import TEStudy, as_key
 
-_TWO_PI = 2.0 * math.pi
 # Keep U inside (0, 1): a law's inverse CDF may be infinite at the ends (Normal, untruncated Rayleigh).
 _U_MIN, _U_MAX = 2.0**-53, 1.0 - 2.0**-53
-
-
-def _import_scipy_stats():
-    try:
-        from scipy import stats
-    except ImportError:
-        raise ImportError("gearte's Sobol' indices use scipy.stats.sobol_indices; install it with "
-                          "pip install 'gearte[sensitivity]' (scipy ≥ 1.11)") from None
-    if not hasattr(stats, "sobol_indices"):
-        raise ImportError("gearte's Sobol' indices need scipy ≥ 1.11 (scipy.stats.sobol_indices); "
-                          "upgrade with pip install -U 'gearte[sensitivity]'")
-    return stats
 
 
 # ------------------------------------------------------------------ the inputs of a model
@@ -317,7 +306,6 @@ def sobol_indices(
     if isinstance(n_resamples, bool) or not isinstance(n_resamples, (int, np.integer)) or n_resamples < 10:
         raise ValueError(f"n_resamples: must be a whole number ≥ 10, got {n_resamples!r}")
     key = as_key(key)
-    stats = _import_scipy_stats()
 
     labels, owners, kinds, plan = _plan(drive, model, factors, metric)
     d = len(labels)
@@ -374,8 +362,6 @@ def _scipy_indices(stats, f_A, f_B, f_AB, n: int):
 def _bootstrap(res, s1, st, level: float, n_resamples: int, key) -> tuple[np.ndarray, np.ndarray]:
     """Bootstrap intervals (d, 2) from scipy; an input whose index is the same in every resample (an
     input that never changes Y) gets the degenerate interval [S, S]."""
-    import warnings
-
     # SobolResult.bootstrap passes no generator on, so scipy resamples with NumPy's legacy global
     # RandomState: seed it from the key for the call (and put it back) so the intervals are reproducible.
     state = np.random.get_state()
