@@ -30,6 +30,7 @@ demo: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check gearte tests benchmarks
+	$(BIN)/ruff format --check gearte tests benchmarks
 	$(BIN)/basedpyright --level error
 
 test: lint

@@ -54,20 +54,21 @@ ARCSEC_PER_RAD = 180.0 * 3600.0 / math.pi
 #   Δθ_sc = −1/(48000 cos(π/9)) Σ_k M_k sin(f_k θ + s_k φ_k + c_k)   (rad; θ = input angle)
 # Error sources, in this order: E_s, E_p, E_r (manufacturing; phases β_s, β_p, β_r) and
 # A_s, A_p, A_c (assembly; phases γ_s, γ_p, γ_c). Magnitudes in µm.
-SOURCES = ("sun_manufacturing", "planet_manufacturing", "ring_manufacturing",
-           "sun_assembly", "planet_assembly", "carrier_assembly")
+SOURCES = ("sun_manufacturing", "planet_manufacturing", "ring_manufacturing", "sun_assembly", "planet_assembly", "carrier_assembly")
 TOLERANCE_UM = np.array([13.0, 16.0, 21.0, 12.0, 8.0, 15.0])  # Table 1
 _P = math.pi
 #               (source index, frequency × ω_s, phase sign, phase offset rad)
-EQ9_TERMS = [(0, 7 / 8, +1, _P / 9),
-             (1, 7 / 24, -1, 8 * _P / 9),
-             (3, 1 / 8, -1, 8 * _P / 9),
-             (4, 0.0, +1, 10 * _P / 9),
-             (5, 1 / 8, -1, -_P / 9),
-             (2, 1 / 8, -1, _P / 9),
-             (1, 7 / 24, -1, _P / 9),
-             (4, 0.0, +1, 8 * _P / 9),
-             (5, 1 / 8, -1, _P / 9)]
+EQ9_TERMS = [
+    (0, 7 / 8, +1, _P / 9),
+    (1, 7 / 24, -1, 8 * _P / 9),
+    (3, 1 / 8, -1, 8 * _P / 9),
+    (4, 0.0, +1, 10 * _P / 9),
+    (5, 1 / 8, -1, -_P / 9),
+    (2, 1 / 8, -1, _P / 9),
+    (1, 7 / 24, -1, _P / 9),
+    (4, 0.0, +1, 8 * _P / 9),
+    (5, 1 / 8, -1, _P / 9),
+]
 TERM_SOURCE = np.array([t[0] for t in EQ9_TERMS])
 TERM_FREQ = np.array([t[1] for t in EQ9_TERMS])
 TERM_SIGN = np.array([t[2] for t in EQ9_TERMS], dtype=float)
@@ -97,11 +98,11 @@ def peaks_direct(mags, phases, theta) -> np.ndarray:
     out = np.empty(len(mags))
     b = block_size(theta.size)
     for s in range(0, len(mags), b):
-        amp, ph = terms(mags[s:s + b], phases[s:s + b])
+        amp, ph = terms(mags[s : s + b], phases[s : s + b])
         te = np.zeros((len(amp), theta.size))
         for k in range(len(EQ9_TERMS)):
             te += amp[:, k, None] * np.sin(TERM_FREQ[k] * theta[None, :] + ph[:, k, None])
-        out[s:s + b] = np.abs(te).max(axis=1)
+        out[s : s + b] = np.abs(te).max(axis=1)
     return abs(GAIN_RAD_PER_UM) * out
 
 
@@ -122,7 +123,7 @@ def peaks_tabulated(mags, phases, sin_t, cos_t) -> np.ndarray:
     out = np.empty(len(mags))
     b = block_size(sin_t.shape[1])
     for s in range(0, len(mags), b):
-        out[s:s + b] = np.abs(grid_values_tabulated(mags[s:s + b], phases[s:s + b], sin_t, cos_t)).max(axis=1)
+        out[s : s + b] = np.abs(grid_values_tabulated(mags[s : s + b], phases[s : s + b], sin_t, cos_t)).max(axis=1)
     return abs(GAIN_RAD_PER_UM) * out
 
 
@@ -200,11 +201,20 @@ def machine_info() -> dict:
         pass
     usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return {
-        "cpu": cpu, "cpu_count": os.cpu_count(), "usable_cores": usable,
+        "cpu": cpu,
+        "cpu_count": os.cpu_count(),
+        "usable_cores": usable,
         "load_average_at_start": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
-        "platform": platform.platform(), "python": platform.python_version(),
-        "gearte": gearte.__version__, "gearte_commit": commit, "jax": jax.__version__, "jaxlib": jaxlib.__version__,
-        "jax_backend": jax.default_backend(), "equinox": equinox.__version__, "numpy": np.__version__, "numpy_blas": blas,
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "gearte": gearte.__version__,
+        "gearte_commit": commit,
+        "jax": jax.__version__,
+        "jaxlib": jaxlib.__version__,
+        "jax_backend": jax.default_backend(),
+        "equinox": equinox.__version__,
+        "numpy": np.__version__,
+        "numpy_blas": blas,
         "date_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
     }
 
@@ -259,8 +269,10 @@ def main(argv=None) -> int:
     if not np.array_equal(first.values, again.values):
         raise RuntimeError("gearte: repeated runs gave different values")
     exact = first.values  # rad; monte_carlo returns NumPy arrays, so the timing includes completion
-    print(f"gearte, {n:,} samples: first call {t_first:.3f} s, steady state {steady:.3f} s (best of {args.repeats}), "
-          f"chunk size {first.chunk_size}")
+    print(
+        f"gearte, {n:,} samples: first call {t_first:.3f} s, steady state {steady:.3f} s (best of {args.repeats}), "
+        f"chunk size {first.chunk_size}"
+    )
 
     # 2a. Same draws as gearte's samples, for the accuracy check.
     keys = sample_keys(as_key(study.seed), 0, n)
@@ -272,8 +284,11 @@ def main(argv=None) -> int:
     comps = jax.vmap(study.drive.components)(jax.tree.map(lambda x: x[chk], errs))
     th = np.random.default_rng(1).uniform(0.0, TWO_PI * HYPER_PERIOD_REVS, 257)
     freq = np.array([float(f) for f in comps.freq])
-    te_model = np.einsum("bk,bkt->bt", np.asarray(comps.amplitude * comps.gain),
-                         np.sin(freq[None, :, None] * th[None, None, :] + np.asarray(comps.phase)[:, :, None]))
+    te_model = np.einsum(
+        "bk,bkt->bt",
+        np.asarray(comps.amplitude * comps.gain),
+        np.sin(freq[None, :, None] * th[None, None, :] + np.asarray(comps.phase)[:, :, None]),
+    )
     amp_b, ph_b = terms(mags[chk], phases[chk])
     te_base = GAIN_RAD_PER_UM * np.einsum("bk,bkt->bt", amp_b, np.sin(TERM_FREQ[None, :, None] * th[None, None, :] + ph_b[:, :, None]))
     physics_diff = float(np.max(np.abs(te_model - te_base)) / np.max(np.abs(te_model)))
@@ -291,9 +306,9 @@ def main(argv=None) -> int:
         out = {p: np.empty(n) for p in densities}
         b = block_size(theta.size)
         for s in range(0, n, b):
-            g = np.abs(grid_values_tabulated(mags[s:s + b], phases[s:s + b], sin_t, cos_t))
+            g = np.abs(grid_values_tabulated(mags[s : s + b], phases[s : s + b], sin_t, cos_t))
             for p in densities:
-                out[p][s:s + b] = g[:, ::p_max // p].max(axis=1)
+                out[p][s : s + b] = g[:, :: p_max // p].max(axis=1)
         return {p: abs(GAIN_RAD_PER_UM) * v for p, v in out.items()}
 
     accuracy = []
@@ -304,9 +319,15 @@ def main(argv=None) -> int:
         print(f"  accuracy sweep {densities}: {time.perf_counter() - t0:.1f} s")
         for p in densities:
             rel = (exact - gp[p]) / exact
-            accuracy.append({"points_per_rev": p, "grid_points": HYPER_PERIOD_REVS * p,
-                             "max_rel_error": float(np.max(np.abs(rel))), "median_rel_error": float(np.median(np.abs(rel))),
-                             "max_grid_above_gearte_rel": float(np.max(-rel))})
+            accuracy.append(
+                {
+                    "points_per_rev": p,
+                    "grid_points": HYPER_PERIOD_REVS * p,
+                    "max_rel_error": float(np.max(np.abs(rel))),
+                    "median_rel_error": float(np.median(np.abs(rel))),
+                    "max_grid_above_gearte_rel": float(np.max(-rel)),
+                }
+            )
             if chosen is None and accuracy[-1]["max_rel_error"] <= args.tolerance:
                 chosen = p
         if chosen is not None:
@@ -317,11 +338,12 @@ def main(argv=None) -> int:
     # A grid maximum can never exceed the true maximum: if it does, gearte's peak is short.
     grid_above = max(a["max_grid_above_gearte_rel"] for a in accuracy)
     for a in accuracy:
-        print(f"  {a['points_per_rev']:6d} points/rev: max relative error {a['max_rel_error']:.2e}, "
-              f"median {a['median_rel_error']:.2e}")
-    print(f"equal accuracy (≤ {args.tolerance:g}): {chosen} points per input revolution "
-          f"({HYPER_PERIOD_REVS * chosen:,} grid points over the hyper-period); "
-          f"largest excess of a grid peak over gearte's: {grid_above:.1e} (relative)")
+        print(f"  {a['points_per_rev']:6d} points/rev: max relative error {a['max_rel_error']:.2e}, median {a['median_rel_error']:.2e}")
+    print(
+        f"equal accuracy (≤ {args.tolerance:g}): {chosen} points per input revolution "
+        f"({HYPER_PERIOD_REVS * chosen:,} grid points over the hyper-period); "
+        f"largest excess of a grid peak over gearte's: {grid_above:.1e} (relative)"
+    )
 
     # The direct formulation evaluates the same grid points; check its error on the timing subset.
     m = min(args.subset_direct, n)
@@ -329,8 +351,12 @@ def main(argv=None) -> int:
 
     # 2c. Baseline timing, on subsets, with its own numpy.random draws.
     baseline = []
-    for variant, p, size in (("direct", chosen, args.subset_direct), ("tabulated", chosen, args.subset),
-                             ("direct", 256, args.subset), ("tabulated", 256, args.subset)):
+    for variant, p, size in (
+        ("direct", chosen, args.subset_direct),
+        ("tabulated", chosen, args.subset),
+        ("direct", 256, args.subset),
+        ("tabulated", 256, args.subset),
+    ):
         rng = np.random.default_rng(12345)
         if variant == "direct":
             t_setup = 0.0
@@ -339,20 +365,36 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             sin_t, cos_t = tables(grid(p))
             t_setup = time.perf_counter() - t0
-            best, all_t = best_of(lambda rng=rng, size=size, sin_t=sin_t, cos_t=cos_t: baseline_tabulated(rng, size, sin_t, cos_t),
-                                  args.baseline_repeats)
-        row = {"variant": variant, "points_per_rev": p, "max_rel_error": acc[p]["max_rel_error"] if p in acc else None,
-               "subset_samples": size, "seconds_best": best, "seconds_all": all_t, "setup_seconds_excluded": t_setup,
-               "per_sample_s": best / size}
+            best, all_t = best_of(
+                lambda rng=rng, size=size, sin_t=sin_t, cos_t=cos_t: baseline_tabulated(rng, size, sin_t, cos_t), args.baseline_repeats
+            )
+        row = {
+            "variant": variant,
+            "points_per_rev": p,
+            "max_rel_error": acc[p]["max_rel_error"] if p in acc else None,
+            "subset_samples": size,
+            "seconds_best": best,
+            "seconds_all": all_t,
+            "setup_seconds_excluded": t_setup,
+            "per_sample_s": best / size,
+        }
         baseline.append(row)
-        print(f"baseline {variant:9s} {p:6d} points/rev: {fmt_us(row['per_sample_s'])} per sample "
-              f"(best of {args.baseline_repeats} on {size:,} samples)")
+        print(
+            f"baseline {variant:9s} {p:6d} points/rev: {fmt_us(row['per_sample_s'])} per sample "
+            f"(best of {args.baseline_repeats} on {size:,} samples)"
+        )
 
     # 3. End to end: the command line, a fresh process, compilation included.
     env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_COMPILATION_CACHE")}
     gearte_cli = Path(sys.executable).with_name("gearte")
-    cmd_base = [str(gearte_cli) if gearte_cli.exists() else "gearte", "run", str(CONFIG.relative_to(ROOT)),
-                "--samples", str(args.e2e_samples), "--no-progress"]
+    cmd_base = [
+        str(gearte_cli) if gearte_cli.exists() else "gearte",
+        "run",
+        str(CONFIG.relative_to(ROOT)),
+        "--samples",
+        str(args.e2e_samples),
+        "--no-progress",
+    ]
     e2e_times = []
     tmp = Path(tempfile.mkdtemp(prefix="gearte-bench-"))
     try:
@@ -391,15 +433,33 @@ def main(argv=None) -> int:
         "benchmark": "planetary_mc",
         "study": str(CONFIG.relative_to(ROOT)),
         "machine": info,
-        "gearte": {"samples": n, "chunk_size": first.chunk_size, "first_call_s": t_first, "steady_state_s": steady,
-                   "steady_state_all_s": steady_all, "compile_s": t_first - steady, "per_sample_steady_s": steady_per_sample,
-                   "repeats": args.repeats},
-        "accuracy": {"tolerance": args.tolerance, "equal_accuracy_points_per_rev": chosen, "draws": n,
-                     "direct_formulation_max_rel_error_on_subset": direct_err, "physics_check_max_rel_diff": physics_diff,
-                     "max_grid_peak_above_gearte_rel": grid_above, "densities": accuracy},
+        "gearte": {
+            "samples": n,
+            "chunk_size": first.chunk_size,
+            "first_call_s": t_first,
+            "steady_state_s": steady,
+            "steady_state_all_s": steady_all,
+            "compile_s": t_first - steady,
+            "per_sample_steady_s": steady_per_sample,
+            "repeats": args.repeats,
+        },
+        "accuracy": {
+            "tolerance": args.tolerance,
+            "equal_accuracy_points_per_rev": chosen,
+            "draws": n,
+            "direct_formulation_max_rel_error_on_subset": direct_err,
+            "physics_check_max_rel_diff": physics_diff,
+            "max_grid_peak_above_gearte_rel": grid_above,
+            "densities": accuracy,
+        },
         "baseline": baseline,
-        "end_to_end": {"command": " ".join(cmd_base + ["--out", "<tmpdir>"]), "samples": args.e2e_samples,
-                       "wall_s_all": e2e_times, "wall_s_median": e2e, "per_sample_s": e2e_per_sample},
+        "end_to_end": {
+            "command": " ".join(cmd_base + ["--out", "<tmpdir>"]),
+            "samples": args.e2e_samples,
+            "wall_s_all": e2e_times,
+            "wall_s_median": e2e,
+            "per_sample_s": e2e_per_sample,
+        },
         "targets_met": targets,
     }
     md = report(result)
@@ -423,68 +483,97 @@ def report(r: dict) -> str:
     m, g, a, e = r["machine"], r["gearte"], r["accuracy"], r["end_to_end"]
     chosen = a["equal_accuracy_points_per_rev"]
     yes = lambda ok: "met" if ok else "**not met**"
-    L = ["# Benchmark: planetary Monte Carlo (random-assembly study)", "",
-         f"Study `{r['study']}` (Wang et al. 2013, Fig. 2): Table 1 magnitudes, all phases uniform, single-path 2K-H model, "
-         "peak |Δθ| over the 24-input-revolution hyper-period.", "",
-         "## Machine", "",
-         "| | |", "|---|---|",
-         f"| CPU | {m['cpu']} ({m['usable_cores']} usable cores of {m['cpu_count']}) |",
-         f"| load average at start / end (1 min) | {m['load_average_at_start'][0]:.2f} / {m['load_average_at_end'][0]:.2f} |",
-         "| CPU used by other processes during the run | "
-         + (f"{m['other_processes_cpu_share']:.0%} of all cores |" if m.get("other_processes_cpu_share") is not None else "unknown |"),
-         f"| platform | {m['platform']} |",
-         f"| gearte commit | {m['gearte_commit']} |",
-         f"| versions | gearte {m['gearte']}, JAX {m['jax']} / jaxlib {m['jaxlib']} ({m['jax_backend']}), equinox {m['equinox']}, "
-         f"NumPy {m['numpy']} ({m['numpy_blas']}), Python {m['python']} |",
-         f"| date (UTC) | {m['date_utc']} |", "",
-         "## Results", "",
-         "| measurement | samples | time | per sample | target |", "|---|---|---|---|---|",
-         f"| gearte, first call (compilation + run) | {g['samples']:,} | {g['first_call_s']:.3f} s | | |",
-         f"| gearte, steady state (best of {g['repeats']}), exact peaks | {g['samples']:,} | {g['steady_state_s']:.3f} s | "
-         f"{fmt_us(g['per_sample_steady_s'])} | ≤ 0.5 s: {yes(r['targets_met']['steady_state_le_0.5s'])} |",
-         f"| gearte, compilation (first call − steady state) | | {g['compile_s']:.3f} s | | |",
-         f"| gearte end to end: `gearte run … --samples {e['samples']:,}` (median of {len(e['wall_s_all'])}; "
-         f"start-up, import, compilation, plots, files) | {e['samples']:,} | {e['wall_s_median']:.2f} s | {fmt_us(e['per_sample_s'])} | |"]
+    L = [
+        "# Benchmark: planetary Monte Carlo (random-assembly study)",
+        "",
+        f"Study `{r['study']}` (Wang et al. 2013, Fig. 2): Table 1 magnitudes, all phases uniform, single-path 2K-H model, "
+        "peak |Δθ| over the 24-input-revolution hyper-period.",
+        "",
+        "## Machine",
+        "",
+        "| | |",
+        "|---|---|",
+        f"| CPU | {m['cpu']} ({m['usable_cores']} usable cores of {m['cpu_count']}) |",
+        f"| load average at start / end (1 min) | {m['load_average_at_start'][0]:.2f} / {m['load_average_at_end'][0]:.2f} |",
+        "| CPU used by other processes during the run | "
+        + (f"{m['other_processes_cpu_share']:.0%} of all cores |" if m.get("other_processes_cpu_share") is not None else "unknown |"),
+        f"| platform | {m['platform']} |",
+        f"| gearte commit | {m['gearte_commit']} |",
+        f"| versions | gearte {m['gearte']}, JAX {m['jax']} / jaxlib {m['jaxlib']} ({m['jax_backend']}), equinox {m['equinox']}, "
+        f"NumPy {m['numpy']} ({m['numpy_blas']}), Python {m['python']} |",
+        f"| date (UTC) | {m['date_utc']} |",
+        "",
+        "## Results",
+        "",
+        "| measurement | samples | time | per sample | target |",
+        "|---|---|---|---|---|",
+        f"| gearte, first call (compilation + run) | {g['samples']:,} | {g['first_call_s']:.3f} s | | |",
+        f"| gearte, steady state (best of {g['repeats']}), exact peaks | {g['samples']:,} | {g['steady_state_s']:.3f} s | "
+        f"{fmt_us(g['per_sample_steady_s'])} | ≤ 0.5 s: {yes(r['targets_met']['steady_state_le_0.5s'])} |",
+        f"| gearte, compilation (first call − steady state) | | {g['compile_s']:.3f} s | | |",
+        f"| gearte end to end: `gearte run … --samples {e['samples']:,}` (median of {len(e['wall_s_all'])}; "
+        f"start-up, import, compilation, plots, files) | {e['samples']:,} | {e['wall_s_median']:.2f} s | {fmt_us(e['per_sample_s'])} | |",
+    ]
     for b in r["baseline"]:
         err = f"{b['max_rel_error']:.1e}" if b["max_rel_error"] is not None else "—"
         tgt = ""
         if b["points_per_rev"] == chosen:
             tgt = f"end-to-end ratio ≥ 100×: {yes(b['ratio_vs_gearte_end_to_end'] >= 100)}"
-        L.append(f"| NumPy baseline, {b['variant']}, {b['points_per_rev']:,} points/rev (max rel. error {err}); "
-                 f"**measured on a subset** | {b['subset_samples']:,} | {b['seconds_best']:.3f} s | {fmt_us(b['per_sample_s'])} | {tgt} |")
-    L += ["", "Speed-up of gearte per sample (baseline time per sample ÷ gearte time per sample):", "",
-          "| baseline | points/rev | max rel. error | vs gearte steady state | vs gearte end to end |", "|---|---|---|---|---|"]
+        L.append(
+            f"| NumPy baseline, {b['variant']}, {b['points_per_rev']:,} points/rev (max rel. error {err}); "
+            f"**measured on a subset** | {b['subset_samples']:,} | {b['seconds_best']:.3f} s | {fmt_us(b['per_sample_s'])} | {tgt} |"
+        )
+    L += [
+        "",
+        "Speed-up of gearte per sample (baseline time per sample ÷ gearte time per sample):",
+        "",
+        "| baseline | points/rev | max rel. error | vs gearte steady state | vs gearte end to end |",
+        "|---|---|---|---|---|",
+    ]
     for b in r["baseline"]:
         err = f"{b['max_rel_error']:.1e}" if b["max_rel_error"] is not None else "—"
-        L.append(f"| {b['variant']} | {b['points_per_rev']:,} | {err} | {ratio(b['ratio_vs_gearte_steady'])} | {ratio(b['ratio_vs_gearte_end_to_end'])} |")
-    L += ["", "## Equal accuracy", "",
-          f"Grid peak of the NumPy baseline against gearte's exact peak, on gearte's own draws of the same {a['draws']:,} samples "
-          f"(relative error |exact − grid| / exact). Target ≤ {a['tolerance']:g}: the baseline runs at **{chosen:,} points per input "
-          f"revolution** ({chosen * 24:,} points over the hyper-period).", "",
-          "| points per input revolution | grid points | max rel. error | median rel. error |", "|---|---|---|---|"]
+        L.append(
+            f"| {b['variant']} | {b['points_per_rev']:,} | {err} | {ratio(b['ratio_vs_gearte_steady'])} | {ratio(b['ratio_vs_gearte_end_to_end'])} |"
+        )
+    L += [
+        "",
+        "## Equal accuracy",
+        "",
+        f"Grid peak of the NumPy baseline against gearte's exact peak, on gearte's own draws of the same {a['draws']:,} samples "
+        f"(relative error |exact − grid| / exact). Target ≤ {a['tolerance']:g}: the baseline runs at **{chosen:,} points per input "
+        f"revolution** ({chosen * 24:,} points over the hyper-period).",
+        "",
+        "| points per input revolution | grid points | max rel. error | median rel. error |",
+        "|---|---|---|---|",
+    ]
     for d in a["densities"]:
         L.append(f"| {d['points_per_rev']:,} | {d['grid_points']:,} | {d['max_rel_error']:.2e} | {d['median_rel_error']:.2e} |")
-    L += ["",
-          f"- The baseline's nine terms (eq. (9) of Wang et al. 2013, planet terms at 7/24) equal gearte's model terms: largest relative TE "
-          f"difference {a['physics_check_max_rel_diff']:.1e} on 64 samples.",
-          f"- The direct formulation at {chosen:,} points/rev has max relative error {a['direct_formulation_max_rel_error_on_subset']:.1e} "
-          "on its timing subset (the same grid as the tabulated one).",
-          f"- No grid peak exceeds gearte's exact peak by more than {a['max_grid_peak_above_gearte_rel']:.1e} (relative): "
-          "gearte does not miss maxima on these draws.", "",
-          "## Notes", "",
-          "- gearte's times are wall-clock times of `gearte.monte_carlo(...)`, which returns NumPy arrays, so the computation "
-          "has finished when it returns. Steady state reuses the compiled code.",
-          "- The baseline draws its phases with `numpy.random` (magnitudes are fixed at the tolerances in this study), "
-          "computes the nine terms on the grid and takes max |TE| per sample, in blocks of samples. "
-          "\"direct\" calls `np.sin` for each term and grid point (single-threaded NumPy ufuncs); \"tabulated\" "
-          "precomputes sin and cos of each term's frequency on the grid (setup excluded from its time) and uses a "
-          "matrix product (OpenBLAS, may use all cores).",
-          "- Baseline per-sample times are measured on a subset of samples, because the baseline at full density takes "
-          "milliseconds per sample; its cost is linear in the number of samples.",
-          f"- End to end includes Python start-up, importing JAX, compiling, the {e['samples']:,}-sample Monte Carlo, the histogram "
-          "and trace plots, `samples.npz`, `summary.json` and `report.md`; no persistent compilation cache.",
-          f"- Runs: gearte steady state {', '.join(f'{t:.3f}' for t in g['steady_state_all_s'])} s; end to end "
-          f"{', '.join(f'{t:.2f}' for t in e['wall_s_all'])} s.", ""]
+    L += [
+        "",
+        f"- The baseline's nine terms (eq. (9) of Wang et al. 2013, planet terms at 7/24) equal gearte's model terms: largest relative TE "
+        f"difference {a['physics_check_max_rel_diff']:.1e} on 64 samples.",
+        f"- The direct formulation at {chosen:,} points/rev has max relative error {a['direct_formulation_max_rel_error_on_subset']:.1e} "
+        "on its timing subset (the same grid as the tabulated one).",
+        f"- No grid peak exceeds gearte's exact peak by more than {a['max_grid_peak_above_gearte_rel']:.1e} (relative): "
+        "gearte does not miss maxima on these draws.",
+        "",
+        "## Notes",
+        "",
+        "- gearte's times are wall-clock times of `gearte.monte_carlo(...)`, which returns NumPy arrays, so the computation "
+        "has finished when it returns. Steady state reuses the compiled code.",
+        "- The baseline draws its phases with `numpy.random` (magnitudes are fixed at the tolerances in this study), "
+        "computes the nine terms on the grid and takes max |TE| per sample, in blocks of samples. "
+        '"direct" calls `np.sin` for each term and grid point (single-threaded NumPy ufuncs); "tabulated" '
+        "precomputes sin and cos of each term's frequency on the grid (setup excluded from its time) and uses a "
+        "matrix product (OpenBLAS, may use all cores).",
+        "- Baseline per-sample times are measured on a subset of samples, because the baseline at full density takes "
+        "milliseconds per sample; its cost is linear in the number of samples.",
+        f"- End to end includes Python start-up, importing JAX, compiling, the {e['samples']:,}-sample Monte Carlo, the histogram "
+        "and trace plots, `samples.npz`, `summary.json` and `report.md`; no persistent compilation cache.",
+        f"- Runs: gearte steady state {', '.join(f'{t:.3f}' for t in g['steady_state_all_s'])} s; end to end "
+        f"{', '.join(f'{t:.2f}' for t in e['wall_s_all'])} s.",
+        "",
+    ]
     return "\n".join(L)
 
 

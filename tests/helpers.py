@@ -52,8 +52,12 @@ def reference_extrema(amps, phases, freqs, *, per_period: int = 64):
         best = g.max()
         loc = loc[g[loc] + 2.0 * bound >= best]  # (twice the bound: a margin for rounding)
         for i in loc:
-            r = minimize_scalar(lambda t, sign=sign: -sign * trig_eval(amps, phases, freqs, np.array([t]))[0],
-                                bounds=(th[i] - h, th[i] + h), method="bounded", options={"xatol": 1e-13})
+            r = minimize_scalar(
+                lambda t, sign=sign: -sign * trig_eval(amps, phases, freqs, np.array([t]))[0],
+                bounds=(th[i] - h, th[i] + h),
+                method="bounded",
+                options={"xatol": 1e-13},
+            )
             best = max(best, -r.fun)
         out.append(sign * best)
     return out[0], out[1]

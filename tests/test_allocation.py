@@ -39,8 +39,12 @@ def test_two_equal_frequency_components_cancel_to_the_difference():
 
 def test_three_phasors_that_can_close_a_triangle_cancel_completely():
     d = explicit(("a", 2, 0.0), ("b", 2, 0.0), ("c", 2, 0.0), ("d", 5, 0.0))
-    errs = {"a": gearte.Eccentricity(3.0, 0.0), "b": gearte.Eccentricity(4.0, 1.0), "c": gearte.Eccentricity(5.0, 2.0),
-            "d": gearte.Eccentricity(1.0, 0.7)}
+    errs = {
+        "a": gearte.Eccentricity(3.0, 0.0),
+        "b": gearte.Eccentricity(4.0, 1.0),
+        "c": gearte.Eccentricity(5.0, 2.0),
+        "d": gearte.Eccentricity(1.0, 0.7),
+    }
     r = allocate_measured(d, errs, adjust={"b": None, "c": None}, key=1, starts=8)
     # The frequency-2 group closes (3-4-5 triangle); only the frequency-5 term is left.
     np.testing.assert_allclose(float(r.te), 1.0 * GAIN, rtol=1e-4)
@@ -49,7 +53,9 @@ def test_three_phasors_that_can_close_a_triangle_cancel_completely():
 def test_reported_te_re_evaluated_independently():
     d = wang2013.table1_drive()
     rng = np.random.default_rng(0)
-    errs = {k: gearte.Eccentricity(v * rng.uniform(0.5, 1.0), rng.uniform(0, 2 * math.pi)) for k, v in wang2013.TABLE1_TOLERANCES_UM.items()}
+    errs = {
+        k: gearte.Eccentricity(v * rng.uniform(0.5, 1.0), rng.uniform(0, 2 * math.pi)) for k, v in wang2013.TABLE1_TOLERANCES_UM.items()
+    }
     r = allocate_measured(d, errs, adjust={"sun_assembly": None, "carrier_assembly": None}, key=2, starts=8)
     assert float(r.te) < float(r.te_before)
     used = dict(errs) | {k: gearte.Eccentricity(errs[k].magnitude, r.phases[k]) for k in r.phases}
@@ -66,8 +72,11 @@ def test_discrete_positions_are_verified_by_enumeration():
     assert r.enumerated
     # Brute force in NumPy over all 12 × 8 positions.
     th = np.linspace(0, 2 * math.pi, 20001)
-    best = min(np.max(np.abs(5 * np.sin(th + 0.3) + 4 * np.sin(th + i * math.pi / 6) + 2 * np.sin(3 * th + j * math.pi / 4)))
-               for i in range(12) for j in range(8))
+    best = min(
+        np.max(np.abs(5 * np.sin(th + 0.3) + 4 * np.sin(th + i * math.pi / 6) + 2 * np.sin(3 * th + j * math.pi / 4)))
+        for i in range(12)
+        for j in range(8)
+    )
     np.testing.assert_allclose(float(r.te) / GAIN, best, rtol=1e-6)
     assert np.isclose(float(r.phases["b"]) % (math.pi / 6), 0, atol=1e-12) or np.isclose(float(r.phases["b"]) % (math.pi / 6), math.pi / 6)
 
@@ -119,16 +128,22 @@ def test_optimal_rule_closes_the_eighth_order_triangle(seed_problem):
 
 def test_expected_against_a_plain_numpy_monte_carlo():
     d = explicit(("a", 1, 0.0), ("b", 3, 0.0), ("c", 3, 0.0))
-    model = gearte.ErrorModel({"a": gearte.ErrorSource(4.0, gearte.UniformPhase()),
-                               "b": gearte.ErrorSource(3.0, gearte.UniformPhase()),
-                               "c": gearte.ErrorSource(2.0, gearte.FixedPhase(0.0))}, d.error_sources)
+    model = gearte.ErrorModel(
+        {
+            "a": gearte.ErrorSource(4.0, gearte.UniformPhase()),
+            "b": gearte.ErrorSource(3.0, gearte.UniformPhase()),
+            "c": gearte.ErrorSource(2.0, gearte.FixedPhase(0.0)),
+        },
+        d.error_sources,
+    )
     p = rule_problem(d, model, adjust={"c": "relative"}, datum="b", tolerances={"a": 4.0, "b": 3.0, "c": 2.0})
     got = float(expected(p, jnp.asarray([math.pi / 2]), key=1, n_samples=20_000)) / GAIN
     # NumPy: phases of a and b uniform, c = b + π/2 → frequency-3 amplitude |3 + 2i| = √13.
     rng = np.random.default_rng(2)
     th = np.linspace(0, 2 * math.pi, 4001)
-    ref = np.mean([np.max(np.abs(4 * np.sin(th + ba) + math.sqrt(13) * np.sin(3 * th + bb)))
-                   for ba, bb in rng.uniform(0, 2 * math.pi, (4000, 2))])
+    ref = np.mean(
+        [np.max(np.abs(4 * np.sin(th + ba) + math.sqrt(13) * np.sin(3 * th + bb))) for ba, bb in rng.uniform(0, 2 * math.pi, (4000, 2))]
+    )
     np.testing.assert_allclose(got, ref, rtol=0.01)
     np.testing.assert_allclose(float(worst_case(p, jnp.asarray([math.pi / 2]))) / GAIN, 4 + math.sqrt(13), rtol=1e-9)
 
@@ -148,8 +163,9 @@ def test_an_unconverged_solve_raises_or_reports_its_result():
 
 def test_rule_problem_validation():
     d = explicit(("a", 1, 0.0), ("b", 1, 0.0))
-    model = gearte.ErrorModel({"a": gearte.ErrorSource(1.0, gearte.UniformPhase()), "b": gearte.ErrorSource(1.0, gearte.FixedPhase(0.0))},
-                              d.error_sources)
+    model = gearte.ErrorModel(
+        {"a": gearte.ErrorSource(1.0, gearte.UniformPhase()), "b": gearte.ErrorSource(1.0, gearte.FixedPhase(0.0))}, d.error_sources
+    )
     with pytest.raises(ValueError, match="not an error source"):
         rule_problem(d, model, adjust={"z": "relative"}, datum="a", tolerances={"a": 1, "b": 1})
     with pytest.raises(ValueError, match="'relative'"):
@@ -195,12 +211,20 @@ def test_allocate_example_through_gearte_run(tmp_path):
     assert "Assembly-phase allocation" in (out / "report.md").read_text()
 
 
-@pytest.mark.parametrize("edit,match", [
-    (lambda t: t.replace("[allocation]\n", "[unused_allocation]\n").replace("[allocation.seed_rule]", "[unused_allocation.seed_rule]"), "add an [allocation] table"),
-    (lambda t: t.replace('objective = "worst_case"', 'objective = "cheapest"'), "objective: must be one of"),
-    (lambda t: t.replace('datum = "ring_manufacturing"', 'datum = "sun_assembly"'), "differs from"),
-    (lambda t: t.replace('sun_assembly_rad = "7pi/9"\n', ""), "missing `sun_assembly_deg`"),
-])
+@pytest.mark.parametrize(
+    "edit,match",
+    [
+        (
+            lambda t: t.replace("[allocation]\n", "[unused_allocation]\n").replace(
+                "[allocation.seed_rule]", "[unused_allocation.seed_rule]"
+            ),
+            "add an [allocation] table",
+        ),
+        (lambda t: t.replace('objective = "worst_case"', 'objective = "cheapest"'), "objective: must be one of"),
+        (lambda t: t.replace('datum = "ring_manufacturing"', 'datum = "sun_assembly"'), "differs from"),
+        (lambda t: t.replace('sun_assembly_rad = "7pi/9"\n', ""), "missing `sun_assembly_deg`"),
+    ],
+)
 def test_bad_allocation_configs(edit, match, tmp_path):
     cfg = tmp_path / "bad.toml"
     cfg.write_text(edit((ROOT / "examples" / "planetary_wang2013_allocate.toml").read_text()))

@@ -24,8 +24,10 @@ GAIN = 1e-5
 def two_source_problem(spec=20 * GAIN, target=0.99, **kw):
     d = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 3)], gain=GAIN)
     law = lambda t: gearte.Rayleigh(t / 2, truncate_at=t)
-    model = gearte.ErrorModel({"a": gearte.ErrorSource(law(10.0), gearte.UniformPhase()),
-                               "b": gearte.ErrorSource(law(10.0), gearte.UniformPhase())}, d.error_sources)
+    model = gearte.ErrorModel(
+        {"a": gearte.ErrorSource(law(10.0), gearte.UniformPhase()), "b": gearte.ErrorSource(law(10.0), gearte.UniformPhase())},
+        d.error_sources,
+    )
     # b costs four times as much to tighten: the budget should tighten a more.
     costs = {"a": gearte.Reciprocal(0.0, 10.0), "b": gearte.Reciprocal(0.0, 40.0)}
     return budget_problem(d, model, costs=costs, nominal={"a": 10.0, "b": 10.0}, spec=spec, statistic=gearte.Yield(target), **kw)
@@ -38,8 +40,12 @@ def study_at(p, tolerances):
     machinery; `gearte.monte_carlo(study, key=k)` draws sample i with fold_in(k, i), the same
     keys as the budget's `contributions(key=k)` (one key convention for every study).
     """
-    model = p.model.replace(**{n: gearte.ErrorSource(p.model.sources[n].magnitude.scaled(tolerances[n] / float(p.nominal[n])),
-                                                     p.model.sources[n].phase) for n in p.names})
+    model = p.model.replace(
+        **{
+            n: gearte.ErrorSource(p.model.sources[n].magnitude.scaled(tolerances[n] / float(p.nominal[n])), p.model.sources[n].phase)
+            for n in p.names
+        }
+    )
     return gearte.TEStudy(p.drive, model, metric=p.constraints[0].metric)
 
 
@@ -76,7 +82,9 @@ def test_smooth_quantile_tends_to_the_empirical_one_and_has_exact_gradients():
     check_grads(q_data, (x[:200],), order=1, modes=["rev"], eps=1e-6, atol=1e-7, rtol=1e-5)
     # ... and then the smoothed quantile is homogeneous: q(s·x) = s·q(x).
     xp = jnp.abs(x)
-    np.testing.assert_allclose(smooth_quantile(3.0 * xp, 0.9, 0.02 * jnp.mean(3.0 * xp)), 3.0 * smooth_quantile(xp, 0.9, 0.02 * jnp.mean(xp)), rtol=1e-12)
+    np.testing.assert_allclose(
+        smooth_quantile(3.0 * xp, 0.9, 0.02 * jnp.mean(3.0 * xp)), 3.0 * smooth_quantile(xp, 0.9, 0.02 * jnp.mean(xp)), rtol=1e-12
+    )
 
 
 def test_te_is_homogeneous_in_the_tolerances_and_contributions_add_up():
@@ -109,8 +117,9 @@ def test_single_source_budget_matches_the_closed_form():
     # the 99 % yield at spec needs T = spec / (g · q₀.₉₉(u)), with u's quantile known in closed form.
     d = ExplicitDrive([ExplicitTerm("a", 1)], gain=GAIN)
     model = gearte.ErrorModel({"a": gearte.ErrorSource(gearte.Rayleigh(5.0, truncate_at=10.0), gearte.UniformPhase())}, d.error_sources)
-    p = budget_problem(d, model, costs={"a": gearte.Reciprocal(0.0, 1.0)}, nominal={"a": 10.0}, spec=20 * GAIN,
-                       statistic=gearte.Yield(0.99))
+    p = budget_problem(
+        d, model, costs={"a": gearte.Reciprocal(0.0, 1.0)}, nominal={"a": 10.0}, spec=20 * GAIN, statistic=gearte.Yield(0.99)
+    )
     r = optimise_budget(p, key=0, n_samples=2000, n_check=40_000)
     assert r.result == gearte.RESULTS.successful and r.converged
     cdf1 = sps.rayleigh(scale=0.5).cdf(1.0)
@@ -138,11 +147,19 @@ def test_bad_budget_inputs():
     with pytest.raises(ValueError, match="yield"):
         two_source_problem(target=1.2)
     with pytest.raises(ValueError, match="nominal"):
-        budget_problem(two_source_problem().drive, two_source_problem().model, costs=two_source_problem().costs, nominal={"a": 10.0, "b": 0.0}, spec=1e-4)
+        budget_problem(
+            two_source_problem().drive,
+            two_source_problem().model,
+            costs=two_source_problem().costs,
+            nominal={"a": 10.0, "b": 0.0},
+            spec=1e-4,
+        )
     # A budget may cover some of the sources now (the others keep their laws); a cost model must name a source.
     q = two_source_problem()
     with pytest.raises(ValueError, match="costs"):
-        budget_problem(q.drive, q.model, costs={"a": gearte.Reciprocal(0, 1), "z": gearte.Reciprocal(0, 1)}, nominal={"a": 1, "z": 1}, spec=1e-4)
+        budget_problem(
+            q.drive, q.model, costs={"a": gearte.Reciprocal(0, 1), "z": gearte.Reciprocal(0, 1)}, nominal={"a": 1, "z": 1}, spec=1e-4
+        )
     with pytest.raises(ValueError, match="costs"):
         budget_problem(q.drive, q.model, costs={}, nominal={}, spec=1e-4)
     with pytest.raises(ValueError, match="nominal"):
@@ -162,8 +179,11 @@ def test_bad_budget_inputs():
 
 def test_budget_example_through_gearte_run(tmp_path):
     text = (ROOT / "examples" / "planetary_wang2013_budget.toml").read_text()
-    text = (text.replace("samples = 4096 ", "samples = 512 ").replace("check_samples = 50000", "check_samples = 5000")
-            .replace("pareto_specs = [90.0, 105.0, 120.0, 140.0, 160.0]", "pareto_specs = [110.0, 140.0]"))
+    text = (
+        text.replace("samples = 4096 ", "samples = 512 ")
+        .replace("check_samples = 50000", "check_samples = 5000")
+        .replace("pareto_specs = [90.0, 105.0, 120.0, 140.0, 160.0]", "pareto_specs = [110.0, 140.0]")
+    )
     cfg = tmp_path / "b.toml"
     cfg.write_text(text)
     out = tmp_path / "out"
@@ -184,13 +204,19 @@ def test_budget_example_through_gearte_run(tmp_path):
         assert (out / f).exists()
 
 
-@pytest.mark.parametrize("edit,match", [
-    (lambda t: t.replace("spec = 120.0 ", "spec = -5.0 "), r"\[budget\] spec: must be > 0"),
-    (lambda t: t.replace("target = 0.9973", "target = 1.5"), "a yield in"),
-    (lambda t: t.replace('cost_model = "reciprocal"', 'cost_model = "linear"'), "cost_model: must be one of"),
-    (lambda t: t.replace("tolerance_um = 13", "tolerance_um = 0"), r"\[errors.sun_manufacturing.magnitude\] truncate_at_tolerance: the tolerance is 0"),
-    (lambda t: t.replace("maximum_factor = 10.0", "maximum_factor = 0.5"), "maximum_factor"),
-])
+@pytest.mark.parametrize(
+    "edit,match",
+    [
+        (lambda t: t.replace("spec = 120.0 ", "spec = -5.0 "), r"\[budget\] spec: must be > 0"),
+        (lambda t: t.replace("target = 0.9973", "target = 1.5"), "a yield in"),
+        (lambda t: t.replace('cost_model = "reciprocal"', 'cost_model = "linear"'), "cost_model: must be one of"),
+        (
+            lambda t: t.replace("tolerance_um = 13", "tolerance_um = 0"),
+            r"\[errors.sun_manufacturing.magnitude\] truncate_at_tolerance: the tolerance is 0",
+        ),
+        (lambda t: t.replace("maximum_factor = 10.0", "maximum_factor = 0.5"), "maximum_factor"),
+    ],
+)
 def test_bad_budget_configs(edit, match, tmp_path):
     cfg = tmp_path / "bad.toml"
     cfg.write_text(edit((ROOT / "examples" / "planetary_wang2013_budget.toml").read_text()))

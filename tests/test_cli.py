@@ -26,10 +26,12 @@ def run(*args):
 
 
 def test_importing_gearte_changes_no_global_state():
-    code = ("import jax, sys; before = jax.config.read('jax_enable_x64'); import gearte, gearte.cli; "
-            "assert jax.config.read('jax_enable_x64') == before == False, 'x64 changed'; "
-            "assert 'matplotlib.pyplot' not in sys.modules, 'pyplot imported'; "
-            "import matplotlib; assert matplotlib.get_backend() is not None; print('ok')")
+    code = (
+        "import jax, sys; before = jax.config.read('jax_enable_x64'); import gearte, gearte.cli; "
+        "assert jax.config.read('jax_enable_x64') == before == False, 'x64 changed'; "
+        "assert 'matplotlib.pyplot' not in sys.modules, 'pyplot imported'; "
+        "import matplotlib; assert matplotlib.get_backend() is not None; print('ok')"
+    )
     env = {k: v for k, v in os.environ.items() if k not in ("JAX_ENABLE_X64", "MPLBACKEND")}
     env["PYTHONPATH"] = str(ROOT)
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
@@ -37,10 +39,12 @@ def test_importing_gearte_changes_no_global_state():
 
 
 def test_library_entry_points_refuse_float32_clearly():
-    code = ("import gearte, jax.numpy as jnp; from gearte.drives import wang2013\n"
-            "d = wang2013.table1_drive(); m = gearte.ErrorModel({n: gearte.ErrorSource(gearte.Fixed(t), gearte.UniformPhase()) "
-            "for n, t in wang2013.TABLE1_TOLERANCES_UM.items()}, d.error_sources)\n"
-            "try:\n    gearte.monte_carlo(gearte.TEStudy(d, m), key=1, n_samples=8)\nexcept RuntimeError as e:\n    print(e)")
+    code = (
+        "import gearte, jax.numpy as jnp; from gearte.drives import wang2013\n"
+        "d = wang2013.table1_drive(); m = gearte.ErrorModel({n: gearte.ErrorSource(gearte.Fixed(t), gearte.UniformPhase()) "
+        "for n, t in wang2013.TABLE1_TOLERANCES_UM.items()}, d.error_sources)\n"
+        "try:\n    gearte.monte_carlo(gearte.TEStudy(d, m), key=1, n_samples=8)\nexcept RuntimeError as e:\n    print(e)"
+    )
     env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
     env["PYTHONPATH"] = str(ROOT)
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
@@ -111,20 +115,34 @@ BAD = {
     "not assemblable": ({"z_sun = 12": "z_sun = 14", "z_ring = 84": "z_ring = 86"}, "cannot be assembled"),
     "wrong type": ({"z_sun = 12": 'z_sun = "twelve"'}, "[drive] z_sun: expected a whole number"),
     "NaN": ({"module_mm = 1.0": "module_mm = nan"}, "[drive] module_mm: must be a finite number"),
-    "unknown source": ({"__append__": '\n[errors.ring_assembly]\ntolerance_um = 1\nmagnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n'},
-                       "unknown error source `ring_assembly`"),
+    "unknown source": (
+        {"__append__": '\n[errors.ring_assembly]\ntolerance_um = 1\nmagnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n'},
+        "unknown error source `ring_assembly`",
+    ),
     "missing source": ({"[errors.carrier_assembly]": "[unused]"}, "missing error source(s) ['carrier_assembly']"),
-    "bad law": ({'magnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]':
-                 'magnitude = { law = "rayleig" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]'}, "did you mean 'rayleigh'"),
+    "bad law": (
+        {
+            'magnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]': 'magnitude = { law = "rayleig" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]'
+        },
+        "did you mean 'rayleigh'",
+    ),
     "bad seed": ({"seed = 1001": "seed = -4"}, "[study] seed: must be ≥ 0"),
     "bad metric": ({'metric = "peak"': 'metric = "amplitude"'}, "[study] metric: must be one of"),
     "bad angle": ({'pressure_angle_rad = "pi/9"': 'pressure_angle_rad = "pie/9"'}, "cannot read 'pie/9'"),
     "both angle units": ({'pressure_angle_rad = "pi/9"': 'pressure_angle_rad = "pi/9"\npressure_angle_deg = 20'}, "not both"),
     "not toml": ({"[study]": "[study"}, "not valid TOML"),
-    "rayleigh without scale": ({'magnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]':
-                                'magnitude = { law = "rayleigh" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]'}, "needs `scale_um`"),
-    "relative to nothing": ({'magnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]':
-                             'magnitude = { law = "fixed" }\nphase = { rule = "relative", to = "beta_q" }\n\n[errors.planet_manufacturing]'}, "'beta_q' is not an error source"),
+    "rayleigh without scale": (
+        {
+            'magnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]': 'magnitude = { law = "rayleigh" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]'
+        },
+        "needs `scale_um`",
+    ),
+    "relative to nothing": (
+        {
+            'magnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]': 'magnitude = { law = "fixed" }\nphase = { rule = "relative", to = "beta_q" }\n\n[errors.planet_manufacturing]'
+        },
+        "'beta_q' is not an error source",
+    ),
 }
 
 
@@ -190,11 +208,17 @@ def test_real_command_line_entry_point(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(config_text(**{"tolerance_um = 13": "tolerance_um = -13"}))
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    p = subprocess.run([sys.executable, "-m", "gearte", "run", str(bad), "--out", str(tmp_path / "o")], capture_output=True, text=True, env=env)
+    p = subprocess.run(
+        [sys.executable, "-m", "gearte", "run", str(bad), "--out", str(tmp_path / "o")], capture_output=True, text=True, env=env
+    )
     assert p.returncode == 2
     assert "tolerance_um" in p.stderr and "≥ 0" in p.stderr
-    p = subprocess.run([sys.executable, "-m", "gearte", "run", str(RANDOM), "--out", str(tmp_path / "o"), "--samples", "0"],
-                       capture_output=True, text=True, env=env)
+    p = subprocess.run(
+        [sys.executable, "-m", "gearte", "run", str(RANDOM), "--out", str(tmp_path / "o"), "--samples", "0"],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
     assert p.returncode == 2 and "--samples" in p.stderr
     p = subprocess.run([sys.executable, "-m", "gearte", "--version"], capture_output=True, text=True, env=env)
     assert p.returncode == 0 and p.stdout.strip() == f"gearte {gearte.__version__}"

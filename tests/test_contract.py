@@ -171,10 +171,15 @@ def test_toy_drive_budget_through_the_generic_pipeline():
         mp.setitem(DRIVES, "toy_gear_pair", toy_drive.ToyGearPair)
         study = build_study(tomllib.loads(toy_drive.STUDY), "toy.toml")
     spec = 8.0 / gearte.units.ARCMIN_PER_RAD  # 8′
-    p = gearte.budget_problem(study.drive, study.errors, costs={n: gearte.Reciprocal.normalised(t) for n, t in
-                                                                 (("pinion", 10.0), ("gear", 16.0), ("backlash", 20.0))},
-                              nominal={"pinion": 10.0, "gear": 16.0, "backlash": 20.0}, spec=spec, metric=toy_drive.LostMotion(),
-                              statistic=gearte.Yield(0.95))
+    p = gearte.budget_problem(
+        study.drive,
+        study.errors,
+        costs={n: gearte.Reciprocal.normalised(t) for n, t in (("pinion", 10.0), ("gear", 16.0), ("backlash", 20.0))},
+        nominal={"pinion": 10.0, "gear": 16.0, "backlash": 20.0},
+        spec=spec,
+        metric=toy_drive.LostMotion(),
+        statistic=gearte.Yield(0.95),
+    )
     assert not p.homogeneous
     r = gearte.optimise_budget(p, key=1, n_samples=256, n_check=2000)
     assert r.result == gearte.RESULTS.successful
@@ -195,8 +200,15 @@ def test_scale_search_meets_the_constraint_and_its_gradient_matches_finite_diffe
         study = build_study(tomllib.loads(toy_drive.STUDY), "toy.toml")
     nominal = {"pinion": 10.0, "gear": 16.0, "backlash": 20.0}
     spec = 8.0 / gearte.units.ARCMIN_PER_RAD
-    p = gearte.budget_problem(study.drive, study.errors, costs={n: gearte.Reciprocal.normalised(t) for n, t in nominal.items()},
-                              nominal=nominal, spec=spec, metric=toy_drive.LostMotion(), statistic=gearte.Yield(0.95))
+    p = gearte.budget_problem(
+        study.drive,
+        study.errors,
+        costs={n: gearte.Reciprocal.normalised(t) for n, t in nominal.items()},
+        nominal=nominal,
+        spec=spec,
+        metric=toy_drive.LostMotion(),
+        statistic=gearte.Yield(0.95),
+    )
     draws = gb.common_draws(p, jax.random.key(4), 128)
     y = jnp.log(jnp.asarray([12.0, 9.0, 25.0]))
     tol = eqx.filter_jit(gb.tight_tolerances)(p, y, draws)

@@ -20,16 +20,19 @@ def T_at(grade):
     return T5 * 2.0 ** ((grade - 5.0) / 2.0)
 
 
-@pytest.mark.parametrize("model,T,value,slope", [
-    # a + b/T = 2 + 30/5 = 8 ; d/dT = −b/T² = −30/25 = −1.2
-    (gearte.Reciprocal(2.0, 30.0), 5.0, 8.0, -1.2),
-    # a + b/T² = 1 + 50/25 = 3 ; d/dT = −2b/T³ = −100/125 = −0.8
-    (gearte.ReciprocalSquare(1.0, 50.0), 5.0, 3.0, -0.8),
-    # a + b e^(−kT) = 1 + 4 e^(−1) = 1 + 1.4715178 ; d/dT = −k b e^(−kT) = −2 e^(−1) = −0.7357589
-    (gearte.Exponential(1.0, 4.0, 0.5), 2.0, 2.4715177646857693, -0.7357588823428847),
-    # a T^(−k) = 10 · 4^(−1.5) = 10/8 = 1.25 ; d/dT = −k a T^(−k−1) = −1.5 · 10 · 4^(−2.5) = −15/32
-    (gearte.Power(10.0, 1.5), 4.0, 1.25, -0.46875),
-])
+@pytest.mark.parametrize(
+    "model,T,value,slope",
+    [
+        # a + b/T = 2 + 30/5 = 8 ; d/dT = −b/T² = −30/25 = −1.2
+        (gearte.Reciprocal(2.0, 30.0), 5.0, 8.0, -1.2),
+        # a + b/T² = 1 + 50/25 = 3 ; d/dT = −2b/T³ = −100/125 = −0.8
+        (gearte.ReciprocalSquare(1.0, 50.0), 5.0, 3.0, -0.8),
+        # a + b e^(−kT) = 1 + 4 e^(−1) = 1 + 1.4715178 ; d/dT = −k b e^(−kT) = −2 e^(−1) = −0.7357589
+        (gearte.Exponential(1.0, 4.0, 0.5), 2.0, 2.4715177646857693, -0.7357588823428847),
+        # a T^(−k) = 10 · 4^(−1.5) = 10/8 = 1.25 ; d/dT = −k a T^(−k−1) = −1.5 · 10 · 4^(−2.5) = −15/32
+        (gearte.Power(10.0, 1.5), 4.0, 1.25, -0.46875),
+    ],
+)
 def test_values_and_derivatives_by_hand(model, T, value, slope):
     np.testing.assert_allclose(model(T), value, rtol=1e-14)
     np.testing.assert_allclose(jax.grad(model)(T), slope, rtol=1e-14)
@@ -37,9 +40,14 @@ def test_values_and_derivatives_by_hand(model, T, value, slope):
 
 
 def test_normalised_models_cost_one_at_the_reference():
-    for m in [gearte.Reciprocal.normalised(10.0), gearte.ReciprocalSquare.normalised(10.0),
-              gearte.Exponential.normalised(10.0), gearte.Exponential.normalised(10.0, k=0.3),
-              gearte.Power.normalised(10.0), gearte.Power.normalised(10.0, k=2.5)]:
+    for m in [
+        gearte.Reciprocal.normalised(10.0),
+        gearte.ReciprocalSquare.normalised(10.0),
+        gearte.Exponential.normalised(10.0),
+        gearte.Exponential.normalised(10.0, k=0.3),
+        gearte.Power.normalised(10.0),
+        gearte.Power.normalised(10.0, k=2.5),
+    ]:
         np.testing.assert_allclose(m(10.0), 1.0, rtol=1e-14)
     # Halving the tolerance: ×2 (reciprocal), ×4 (reciprocal-square), ×2^k (power).
     np.testing.assert_allclose(gearte.Reciprocal.normalised(10.0)(5.0), 2.0, rtol=1e-14)
@@ -54,8 +62,13 @@ def _grade_table():
     return gearte.GradeTable({4: 10.0, 5: 4.0, 7: 2.0, 9: 1.5}, **GEAR)
 
 
-MODELS = [gearte.Reciprocal(0.5, 20.0), gearte.ReciprocalSquare(0.5, 200.0), gearte.Exponential(0.2, 3.0, 0.1),
-          gearte.Power(7.0, 1.3), _grade_table()]
+MODELS = [
+    gearte.Reciprocal(0.5, 20.0),
+    gearte.ReciprocalSquare(0.5, 200.0),
+    gearte.Exponential(0.2, 3.0, 0.1),
+    gearte.Power(7.0, 1.3),
+    _grade_table(),
+]
 
 
 @pytest.mark.parametrize("model", MODELS, ids=lambda m: type(m).__name__)
@@ -154,25 +167,28 @@ def test_describe():
         gearte.AbstractCostModel()
 
 
-@pytest.mark.parametrize("make,match", [
-    (lambda: gearte.Reciprocal(-1.0, 1.0), r"Reciprocal.a: must be ≥ 0"),
-    (lambda: gearte.Reciprocal(0.0, 0.0), r"Reciprocal.b: must be > 0"),
-    (lambda: gearte.Reciprocal(float("nan"), 1.0), r"Reciprocal.a: must be a finite number"),
-    (lambda: gearte.ReciprocalSquare(0.0, float("inf")), r"ReciprocalSquare.b: must be a finite number"),
-    (lambda: gearte.Exponential(0.0, 1.0, 0.0), r"Exponential.k: must be > 0"),
-    (lambda: gearte.Exponential(0.0, -1.0, 1.0), r"Exponential.b: must be > 0"),
-    (lambda: gearte.Power(0.0, 1.0), r"Power.a: must be > 0"),
-    (lambda: gearte.Power(1.0, "x"), r"Power.k: expected a number"),
-    (lambda: gearte.Reciprocal.normalised(0.0), r"T_ref: must be > 0"),
-    (lambda: gearte.Power.normalised(-2.0), r"T_ref: must be > 0"),
-    (lambda: gearte.GradeTable({5: 1.0}, **GEAR), "at least two grades"),
-    (lambda: gearte.GradeTable({5: 2.0, 12: 1.0}, **GEAR), "grade 12 is outside"),
-    (lambda: gearte.GradeTable({5: 2.0, 6.5: 1.0}, **GEAR), "whole numbers"),
-    (lambda: gearte.GradeTable({5: 2.0, 6: 3.0}, **GEAR), "grade 6 costs more"),
-    (lambda: gearte.GradeTable({5: 2.0, 6: 0.0}, **GEAR), r"costs_by_grade\[6\]: must be > 0"),
-    (lambda: gearte.GradeTable({5: 2.0, 6: 1.0}, **{**GEAR, "quantity": "F_beta"}), "face width"),
-    (lambda: gearte.GradeTable({5: 2.0, 6: 1.0}, **{**GEAR, "diameter": 1.0}), r"5 ≤ d ≤ 15000"),
-])
+@pytest.mark.parametrize(
+    "make,match",
+    [
+        (lambda: gearte.Reciprocal(-1.0, 1.0), r"Reciprocal.a: must be ≥ 0"),
+        (lambda: gearte.Reciprocal(0.0, 0.0), r"Reciprocal.b: must be > 0"),
+        (lambda: gearte.Reciprocal(float("nan"), 1.0), r"Reciprocal.a: must be a finite number"),
+        (lambda: gearte.ReciprocalSquare(0.0, float("inf")), r"ReciprocalSquare.b: must be a finite number"),
+        (lambda: gearte.Exponential(0.0, 1.0, 0.0), r"Exponential.k: must be > 0"),
+        (lambda: gearte.Exponential(0.0, -1.0, 1.0), r"Exponential.b: must be > 0"),
+        (lambda: gearte.Power(0.0, 1.0), r"Power.a: must be > 0"),
+        (lambda: gearte.Power(1.0, "x"), r"Power.k: expected a number"),
+        (lambda: gearte.Reciprocal.normalised(0.0), r"T_ref: must be > 0"),
+        (lambda: gearte.Power.normalised(-2.0), r"T_ref: must be > 0"),
+        (lambda: gearte.GradeTable({5: 1.0}, **GEAR), "at least two grades"),
+        (lambda: gearte.GradeTable({5: 2.0, 12: 1.0}, **GEAR), "grade 12 is outside"),
+        (lambda: gearte.GradeTable({5: 2.0, 6.5: 1.0}, **GEAR), "whole numbers"),
+        (lambda: gearte.GradeTable({5: 2.0, 6: 3.0}, **GEAR), "grade 6 costs more"),
+        (lambda: gearte.GradeTable({5: 2.0, 6: 0.0}, **GEAR), r"costs_by_grade\[6\]: must be > 0"),
+        (lambda: gearte.GradeTable({5: 2.0, 6: 1.0}, **{**GEAR, "quantity": "F_beta"}), "face width"),
+        (lambda: gearte.GradeTable({5: 2.0, 6: 1.0}, **{**GEAR, "diameter": 1.0}), r"5 ≤ d ≤ 15000"),
+    ],
+)
 def test_bad_coefficients(make, match):
     with pytest.raises(ValueError, match=match):
         make()

@@ -56,10 +56,21 @@ def modified(**kw) -> CycloidPin:
 
 def seed_errors(za: int = 25) -> CycloidErrors:
     """The error values of the paper's figures 3–8."""
-    return CycloidErrors(pin_circle_radius=14.0, pin_radius=-25.0, setup_eccentricity=31.5, setup_phase=math.radians(45),
-                         eccentricity=20.0, mandrel_runout=5.0, dressing_x=2.0, dressing_y=2.0, disc_offset=57.5,
-                         disc_offset_phase=math.radians(40), pin_wheel_offset=17.3, pin_wheel_offset_phase=math.radians(10),
-                         indexing=30 / ARCSEC * np.sin(2 * np.pi * np.arange(1, za + 1) / za))
+    return CycloidErrors(
+        pin_circle_radius=14.0,
+        pin_radius=-25.0,
+        setup_eccentricity=31.5,
+        setup_phase=math.radians(45),
+        eccentricity=20.0,
+        mandrel_runout=5.0,
+        dressing_x=2.0,
+        dressing_y=2.0,
+        disc_offset=57.5,
+        disc_offset_phase=math.radians(40),
+        pin_wheel_offset=17.3,
+        pin_wheel_offset_phase=math.radians(10),
+        indexing=30 / ARCSEC * np.sin(2 * np.pi * np.arange(1, za + 1) / za),
+    )
 
 
 def flank_parameter(drive, theta_T):
@@ -108,8 +119,9 @@ def test_pin_radius_error_gives_a_uniform_normal_clearance():
         nc = np.asarray(normal_clearance(d, CycloidErrors(pin_radius=delta_um), 0.3))
         np.testing.assert_allclose(nc, -delta_um * 1e-3, atol=1e-12)
     # The errors may also be given as the protocol's mapping of source names (the others 0).
-    np.testing.assert_array_equal(np.asarray(normal_clearance(d, {"pin_radius": -7.0}, 0.3)),
-                                  np.asarray(normal_clearance(d, CycloidErrors(pin_radius=-7.0), 0.3)))
+    np.testing.assert_array_equal(
+        np.asarray(normal_clearance(d, {"pin_radius": -7.0}, 0.3)), np.asarray(normal_clearance(d, CycloidErrors(pin_radius=-7.0), 0.3))
+    )
 
 
 # ---------------------------------------------------------------- closed forms of the modifications
@@ -224,8 +236,11 @@ def test_rotation_to_contact_against_a_brute_force_search():
 def test_gradients_match_finite_differences():
     d = modified()
     err = cp.checked_errors(d, seed_errors())
-    err = eqx.tree_at(lambda e: (e.infeed, e.pin_tangential, e.pin_circle_eccentricity),
-                      err, (jnp.linspace(-5, 5, 25), 8 * jnp.sin(jnp.arange(26.0)), jnp.asarray(6.0)))
+    err = eqx.tree_at(
+        lambda e: (e.infeed, e.pin_tangential, e.pin_circle_eccentricity),
+        err,
+        (jnp.linspace(-5, 5, 25), 8 * jnp.sin(jnp.arange(26.0)), jnp.asarray(6.0)),
+    )
     theta_T = 0.41
     w = jnp.asarray(np.random.default_rng(0).normal(size=26))
 
@@ -234,8 +249,12 @@ def test_gradients_match_finite_differences():
         dd = eqx.tree_at(lambda x: x.modification, d, mod)
         c = clearances(dd, e, theta_T, normal=True)
         rot = jnp.where(c.reachable, c.rotation_to_contact, 0.0)
-        return (jnp.sum(w * rot) * 1e4 + c.lost_motion * 1e3 + jnp.sum(w * c.normal_clearance)
-                + smooth_loaded_pairs(c, budget_mm=0.2, width_mm=0.02))
+        return (
+            jnp.sum(w * rot) * 1e4
+            + c.lost_motion * 1e3
+            + jnp.sum(w * c.normal_clearance)
+            + smooth_loaded_pairs(c, budget_mm=0.2, width_mm=0.02)
+        )
 
     x = (d.modification, err)
     g = jax.grad(f)(x)
@@ -244,10 +263,22 @@ def test_gradients_match_finite_differences():
     for _ in range(3):
         v = jax.tree.map(lambda a: jnp.asarray(rng.normal(size=np.shape(a))), x)
         # Angles get small steps, µm and mm their own scale.
-        v = (jax.tree.map(lambda a: a * 1e-3, v[0]), eqx.tree_at(
-            lambda e: (e.index_offset, e.indexing, e.setup_phase, e.mandrel_phase, e.disc_offset_phase,
-                       e.pin_wheel_offset_phase, e.pin_circle_eccentricity_phase), v[1],
-            replace_fn=lambda a: a * 1e-4))
+        v = (
+            jax.tree.map(lambda a: a * 1e-3, v[0]),
+            eqx.tree_at(
+                lambda e: (
+                    e.index_offset,
+                    e.indexing,
+                    e.setup_phase,
+                    e.mandrel_phase,
+                    e.disc_offset_phase,
+                    e.pin_wheel_offset_phase,
+                    e.pin_circle_eccentricity_phase,
+                ),
+                v[1],
+                replace_fn=lambda a: a * 1e-4,
+            ),
+        )
         plus = jax.tree.map(lambda a, b: a + h * b, x, v)
         minus = jax.tree.map(lambda a, b: a - h * b, x, v)
         fd = (float(f(plus)) - float(f(minus))) / (2 * h)
@@ -272,21 +303,24 @@ def test_gradients_have_no_nans_for_pins_that_never_touch():
 # ---------------------------------------------------------------- bad inputs
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(z_pins=26, z_lobes=24, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0), "z_lobes"),
-    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=7.5), "K1"),
-    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, K1=1.2), "K1"),
-    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=22.0, eccentricity=6.0), "undercut"),
-    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=24.0, eccentricity=6.0), "overlap"),
-    (dict(z_pins=26, pin_circle_radius=-195.0, pin_radius=13.5, eccentricity=6.0), "pin_circle_radius"),
-    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=-13.5, eccentricity=6.0), "pin_radius"),
-    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=-6.0), "eccentricity"),
-    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5), "eccentricity / K1"),
-    (dict(z_pins=26.5, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0), "z_pins"),
-    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_radius=23.0), "undercut"),
-    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_circle_radius=150.0), "K = a z_b / R_Z"),
-    (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, analysis=CycloidAnalysis), "analysis"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(z_pins=26, z_lobes=24, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0), "z_lobes"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=7.5), "K1"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, K1=1.2), "K1"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=22.0, eccentricity=6.0), "undercut"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=24.0, eccentricity=6.0), "overlap"),
+        (dict(z_pins=26, pin_circle_radius=-195.0, pin_radius=13.5, eccentricity=6.0), "pin_circle_radius"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=-13.5, eccentricity=6.0), "pin_radius"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=-6.0), "eccentricity"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5), "eccentricity / K1"),
+        (dict(z_pins=26.5, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0), "z_pins"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_radius=23.0), "undercut"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_circle_radius=150.0), "K = a z_b / R_Z"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, analysis=CycloidAnalysis), "analysis"),
+    ],
+)
 def test_bad_geometry_is_rejected(kwargs, match):
     with pytest.raises(ValueError, match=match):
         CycloidPin(**kwargs)
@@ -323,10 +357,19 @@ def model(drive, **laws) -> gearte.ErrorModel:
 
 def small_tolerances(drive) -> gearte.ErrorModel:
     u = gearte.Uniform.centred
-    return model(drive, dressing_y=u(2.0), infeed=u(10.0), indexing=u(30 / ARCSEC), setup_eccentricity=gearte.Uniform(0.0, 31.5),
-                 setup_phase=gearte.UniformPhase(), pin_radius=u(16.75, -41.75), eccentricity=u(20.0),
-                 pin_tangential=gearte.Sinusoid(gearte.Uniform(0.0, 90.0), gearte.UniformPhase()), disc_offset=gearte.Uniform(40.0, 90.0),
-                 disc_offset_phase=gearte.UniformPhase())
+    return model(
+        drive,
+        dressing_y=u(2.0),
+        infeed=u(10.0),
+        indexing=u(30 / ARCSEC),
+        setup_eccentricity=gearte.Uniform(0.0, 31.5),
+        setup_phase=gearte.UniformPhase(),
+        pin_radius=u(16.75, -41.75),
+        eccentricity=u(20.0),
+        pin_tangential=gearte.Sinusoid(gearte.Uniform(0.0, 90.0), gearte.UniformPhase()),
+        disc_offset=gearte.Uniform(40.0, 90.0),
+        disc_offset_phase=gearte.UniformPhase(),
+    )
 
 
 def test_drive_declares_its_errors_as_deviation_sources():
@@ -353,8 +396,13 @@ def test_error_model_draws_are_those_of_0_1():
         k = jax.random.fold_in(key, i)
         shape = d.error_sources[name].shape
         if name in ("dressing_y", "infeed", "indexing", "pin_radius", "eccentricity"):
-            centre, half = {"dressing_y": (0, 2.0), "infeed": (0, 10.0), "indexing": (0, 30 / ARCSEC), "pin_radius": (-41.75, 16.75),
-                            "eccentricity": (0, 20.0)}[name]
+            centre, half = {
+                "dressing_y": (0, 2.0),
+                "infeed": (0, 10.0),
+                "indexing": (0, 30 / ARCSEC),
+                "pin_radius": (-41.75, 16.75),
+                "eccentricity": (0, 20.0),
+            }[name]
             want = centre + half * jax.random.uniform(k, shape, dtype=float, minval=-1.0, maxval=1.0)
         elif name in ("setup_eccentricity", "disc_offset"):
             lo, hi = {"setup_eccentricity": (0.0, 31.5), "disc_offset": (40.0, 90.0)}[name]
@@ -462,8 +510,9 @@ def test_tolerance_sensitivities_match_finite_differences_with_common_random_num
 def test_optimiser_keeps_the_lost_motion_within_spec_and_gains_pairs():
     d = modified()
     am = 1 / ARCMIN
-    res = gearte.optimise_modification(d, None, lost_motion_max=20 * am, radial_clearance_min=0.2, positions=pitch_angles(d, 4),
-                                max_steps=60)
+    res = gearte.optimise_modification(
+        d, None, lost_motion_max=20 * am, radial_clearance_min=0.2, positions=pitch_angles(d, 4), max_steps=60
+    )
     assert res.feasible and res.result == gearte.RESULTS.successful
     assert res.lost_motion_max <= 20 * am and res.radial_clearance >= 0.2 - 1e-12
     assert not res.initial.feasible  # the paper's design has ~23′ of lost motion without errors
@@ -495,12 +544,32 @@ def run(*args):
 def test_example_runs_and_writes_every_output(tmp_path, capsys):
     out = tmp_path / "mod"
     assert run("run", ROOT / "examples" / "cycloid_yao2001_modified.toml", "--out", out, "--samples", 40) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["clearance_per_pin.png", "clearance_vs_input.png", "curves.npz", "histogram.png",
-                                                     "monte_carlo.png", "report.md", "rotation_error.png", "samples.npz",
-                                                     "summary.json", "trace.png"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "clearance_per_pin.png",
+        "clearance_vs_input.png",
+        "curves.npz",
+        "histogram.png",
+        "monte_carlo.png",
+        "report.md",
+        "rotation_error.png",
+        "samples.npz",
+        "summary.json",
+        "trace.png",
+    ]
     s = json.loads((out / "summary.json").read_text())
-    for key in ("te", "pairs", "contact_pair", "loaded_pairs", "deformation_budget_mm", "lost_motion_arcmin",
-                "rotation_error_p2p_arcsec", "monte_carlo", "sensitivities", "tolerance_sensitivities", "optimised_modification"):
+    for key in (
+        "te",
+        "pairs",
+        "contact_pair",
+        "loaded_pairs",
+        "deformation_budget_mm",
+        "lost_motion_arcmin",
+        "rotation_error_p2p_arcsec",
+        "monte_carlo",
+        "sensitivities",
+        "tolerance_sensitivities",
+        "optimised_modification",
+    ):
         assert key in s, key
     assert len(s["pairs"]) == 26 and s["deformation_budget_mm"] == 0.2 and s["loaded_pairs_out_of"] == 13
     contact = s["contact_pair"]["pin"]
@@ -517,7 +586,9 @@ def test_example_runs_and_writes_every_output(tmp_path, capsys):
     assert s["lost_motion_at_input_angle_arcmin"] == pytest.approx(float(c.lost_motion) * ARCMIN, rel=1e-12)
     assert s["optimised_modification"]["best"]["feasible"]
     # The study metric's statistics are those of the Monte Carlo's lost motion.
-    assert s["te"]["metric"] == "lost_motion" and s["te"]["mean"] == pytest.approx(s["monte_carlo"]["lost_motion_max_arcmin"]["mean"], rel=1e-12)
+    assert s["te"]["metric"] == "lost_motion" and s["te"]["mean"] == pytest.approx(
+        s["monte_carlo"]["lost_motion_max_arcmin"]["mean"], rel=1e-12
+    )
     with np.load(out / "curves.npz") as z:  # the reference reducer's curves
         assert z["pitch_tangential_clearance_mm"].shape == (64, 26) and z["lost_motion_arcmin"].ndim == 1
     report = (out / "report.md").read_text()
@@ -544,23 +615,33 @@ def _summary(tmp_path, name):
     return json.loads((out / "summary.json").read_text())
 
 
-@pytest.mark.parametrize("edit, match", [
-    (("z_lobes = 25", "z_lobes = 24"), "z_lobes"),
-    (("eccentricity_mm = 6.0", "eccentricity_mm = 8.0"), "K1"),
-    (("pin_radius_mm = 13.880", "pin_radius_mm = 25.0"), "undercut"),
-    (("pin_radius_mm = 13.5 ", "pin_radius_mm = -13.5 "), "pin_radius_mm"),
-    (("deformation_budget_mm = 0.2", "deformation_budget_mm = -0.2"), "deformation_budget_mm"),
-    (("disc_offset_um = 57.5", "disc_ofset_um = 57.5"), "disc_ofset_um"),
-    (("disc_offset_um = 57.5", "disc_offset_mm = 0.0575"), "disc_offset_um"),
-    (("infeed_um = 0 ", "infeed_um = [1, 2] "), "infeed_um"),
-    (('value = { law = "uniform", low_um = -58.5, high_um = -25 }', 'value = { law = "uniform", low_um = -25, high_um = -58.5 }'),
-     "pin_radius.value] high"),
-    (('[errors.eccentricity]\nvalue = { law = "uniform", half_width_um = 20 }', '[errors.eccentricity]\nvalue = { law = "sinusoid", amplitude_um = 20 }'),
-     "sinusoid"),
-    (("lost_motion_max_arcmin = 25", "lost_motion_max_arcmin = -1"), "lost_motion_max_arcmin"),
-    (("positions_per_pitch = 2 ", "positions_per_pitch = 0 "), "positions_per_pitch"),
-    (('metric = "lost_motion"', 'metric = "lost_motoin"'), "lost_motion"),
-])
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (("z_lobes = 25", "z_lobes = 24"), "z_lobes"),
+        (("eccentricity_mm = 6.0", "eccentricity_mm = 8.0"), "K1"),
+        (("pin_radius_mm = 13.880", "pin_radius_mm = 25.0"), "undercut"),
+        (("pin_radius_mm = 13.5 ", "pin_radius_mm = -13.5 "), "pin_radius_mm"),
+        (("deformation_budget_mm = 0.2", "deformation_budget_mm = -0.2"), "deformation_budget_mm"),
+        (("disc_offset_um = 57.5", "disc_ofset_um = 57.5"), "disc_ofset_um"),
+        (("disc_offset_um = 57.5", "disc_offset_mm = 0.0575"), "disc_offset_um"),
+        (("infeed_um = 0 ", "infeed_um = [1, 2] "), "infeed_um"),
+        (
+            ('value = { law = "uniform", low_um = -58.5, high_um = -25 }', 'value = { law = "uniform", low_um = -25, high_um = -58.5 }'),
+            "pin_radius.value] high",
+        ),
+        (
+            (
+                '[errors.eccentricity]\nvalue = { law = "uniform", half_width_um = 20 }',
+                '[errors.eccentricity]\nvalue = { law = "sinusoid", amplitude_um = 20 }',
+            ),
+            "sinusoid",
+        ),
+        (("lost_motion_max_arcmin = 25", "lost_motion_max_arcmin = -1"), "lost_motion_max_arcmin"),
+        (("positions_per_pitch = 2 ", "positions_per_pitch = 0 "), "positions_per_pitch"),
+        (('metric = "lost_motion"', 'metric = "lost_motoin"'), "lost_motion"),
+    ],
+)
 def test_bad_config_exits_2_naming_the_field(tmp_path, capsys, edit, match):
     text = (ROOT / "examples" / "cycloid_yao2001_modified.toml").read_text()
     old, new = edit

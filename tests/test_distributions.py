@@ -64,13 +64,17 @@ def test_signed_laws_for_deviations():
 U = np.linspace(0.01, 0.99, 9)
 
 
-@pytest.mark.parametrize("law,params", [
-    (gearte.Uniform(2.0, 9.0), ("low", "high")),
-    (gearte.Normal(3.0, 2.0), ("mean", "std")),
-    (gearte.TruncatedNormal(5.0, 4.0, 0.0, 12.0), ("mean", "std", "low", "high")),
-    (gearte.Rayleigh(6.5, truncate_at=13.0), ("scale", "truncate_at")),
-    (gearte.Rayleigh(6.5), ("scale",)),
-], ids=lambda v: type(v).__name__ if isinstance(v, gearte.AbstractLaw) else "")
+@pytest.mark.parametrize(
+    "law,params",
+    [
+        (gearte.Uniform(2.0, 9.0), ("low", "high")),
+        (gearte.Normal(3.0, 2.0), ("mean", "std")),
+        (gearte.TruncatedNormal(5.0, 4.0, 0.0, 12.0), ("mean", "std", "low", "high")),
+        (gearte.Rayleigh(6.5, truncate_at=13.0), ("scale", "truncate_at")),
+        (gearte.Rayleigh(6.5), ("scale",)),
+    ],
+    ids=lambda v: type(v).__name__ if isinstance(v, gearte.AbstractLaw) else "",
+)
 def test_inverse_cdf_gradients_in_the_law_parameters(law, params):
     # Budgets and sensitivities differentiate draws through the law parameters (reparameterised
     # draws = inverse CDF of fixed uniforms): check those derivatives against float64 differences.
@@ -107,22 +111,25 @@ def _eccentricity_model(law):
     return ErrorModel({"e": ErrorSource(law, gearte.UniformPhase())}, spec)
 
 
-@pytest.mark.parametrize("make,match", [
-    # A magnitude cannot be negative: signed laws are legal (deviations are signed), so the check
-    # is where a law becomes a magnitude (the error model) and where a magnitude is given (Eccentricity).
-    (lambda: _eccentricity_model(gearte.Fixed(-1.0)), "negative"),
-    (lambda: _eccentricity_model(gearte.Uniform(-1.0, 2.0)), "negative"),
-    (lambda: gearte.Eccentricity(-5.0, 0.0), "negative"),
-    (lambda: gearte.Eccentricity([1.0, -5.0], 0.0), "negative"),
-    (lambda: gearte.Uniform.centred(-1.0), "negative"),
-    (lambda: gearte.Fixed(float("nan")), "finite"),
-    (lambda: gearte.Uniform(5.0, 1.0), "high"),
-    (lambda: gearte.Rayleigh(0.0), "> 0"),
-    (lambda: gearte.Rayleigh(1.0, truncate_at=-2.0), "> 0"),
-    (lambda: gearte.Normal(1.0, -1.0), "negative"),
-    (lambda: gearte.TruncatedNormal(1.0, 1.0, 3.0, 2.0), "low < high"),
-    (lambda: gearte.RelativePhase("", 0.0), "name"),
-])
+@pytest.mark.parametrize(
+    "make,match",
+    [
+        # A magnitude cannot be negative: signed laws are legal (deviations are signed), so the check
+        # is where a law becomes a magnitude (the error model) and where a magnitude is given (Eccentricity).
+        (lambda: _eccentricity_model(gearte.Fixed(-1.0)), "negative"),
+        (lambda: _eccentricity_model(gearte.Uniform(-1.0, 2.0)), "negative"),
+        (lambda: gearte.Eccentricity(-5.0, 0.0), "negative"),
+        (lambda: gearte.Eccentricity([1.0, -5.0], 0.0), "negative"),
+        (lambda: gearte.Uniform.centred(-1.0), "negative"),
+        (lambda: gearte.Fixed(float("nan")), "finite"),
+        (lambda: gearte.Uniform(5.0, 1.0), "high"),
+        (lambda: gearte.Rayleigh(0.0), "> 0"),
+        (lambda: gearte.Rayleigh(1.0, truncate_at=-2.0), "> 0"),
+        (lambda: gearte.Normal(1.0, -1.0), "negative"),
+        (lambda: gearte.TruncatedNormal(1.0, 1.0, 3.0, 2.0), "low < high"),
+        (lambda: gearte.RelativePhase("", 0.0), "name"),
+    ],
+)
 def test_bad_laws(make, match):
     with pytest.raises(ValueError, match=match):
         make()
@@ -135,11 +142,14 @@ def specs(counts):
 
 def test_relative_phase_rule_and_per_planet_broadcast():
     counts = specs({"a": 1, "b": 3, "c": 1})
-    model = ErrorModel({
-        "a": ErrorSource(gearte.Fixed(1.0), gearte.UniformPhase()),
-        "b": ErrorSource(gearte.Fixed(2.0), gearte.RelativePhase("a", 7 * math.pi / 9)),
-        "c": ErrorSource(gearte.Fixed(3.0), gearte.RelativePhase("a", -1.0)),
-    }, counts)
+    model = ErrorModel(
+        {
+            "a": ErrorSource(gearte.Fixed(1.0), gearte.UniformPhase()),
+            "b": ErrorSource(gearte.Fixed(2.0), gearte.RelativePhase("a", 7 * math.pi / 9)),
+            "c": ErrorSource(gearte.Fixed(3.0), gearte.RelativePhase("a", -1.0)),
+        },
+        counts,
+    )
     e = jax.vmap(model.sample)(jax.random.split(jax.random.key(3), 100))
     np.testing.assert_allclose(e["b"].phase - e["a"].phase, 7 * math.pi / 9, atol=1e-12)
     np.testing.assert_allclose(e["c"].phase[:, 0] - e["a"].phase[:, 0], -1.0, atol=1e-12)

@@ -41,21 +41,29 @@ def k_hand(z1, z2, d, kb=1.0):
 
 
 def four_class_drive(z1=180, z2=182, d=90.0, **kw):
-    sources = [HarmonicSource("cs", "circular_spline", tolerance=20.0),
-               HarmonicSource("cs_pitch", "circular_spline", kind="cumulative_pitch", tolerance=25.0),
-               HarmonicSource("fs", "flexspline", tolerance=12.0),
-               HarmonicSource("wg", "wave_generator", tolerance=10.0),
-               HarmonicSource("tooth", "tooth", tolerance=8.0)]
+    sources = [
+        HarmonicSource("cs", "circular_spline", tolerance=20.0),
+        HarmonicSource("cs_pitch", "circular_spline", kind="cumulative_pitch", tolerance=25.0),
+        HarmonicSource("fs", "flexspline", tolerance=12.0),
+        HarmonicSource("wg", "wave_generator", tolerance=10.0),
+        HarmonicSource("tooth", "tooth", tolerance=8.0),
+    ]
     return HarmonicDrive(z1, z2, sources, pitch_diameter=d, **kw)
 
 
 def rayleigh_model(drive, fraction=1 / 6):
-    return ErrorModel({s.name: ErrorSource(Rayleigh(fraction * float(s.tolerance)), UniformPhase()) for s in drive.sources},
-                      drive.error_sources)
+    return ErrorModel(
+        {s.name: ErrorSource(Rayleigh(fraction * float(s.tolerance)), UniformPhase()) for s in drive.sources}, drive.error_sources
+    )
 
 
-UNIT_ERRORS = {"cs": Eccentricity(7.0, 0.4), "cs_pitch": Eccentricity(9.0, 2.1), "fs": Eccentricity(5.0, -1.0),
-               "wg": Eccentricity(3.0, 0.7), "tooth": Eccentricity(2.5, 1.9)}
+UNIT_ERRORS = {
+    "cs": Eccentricity(7.0, 0.4),
+    "cs_pitch": Eccentricity(9.0, 2.1),
+    "fs": Eccentricity(5.0, -1.0),
+    "wg": Eccentricity(3.0, 0.7),
+    "tooth": Eccentricity(2.5, 1.9),
+}
 
 
 @pytest.fixture(scope="module")
@@ -103,9 +111,13 @@ def test_components_match_eq6_and_eq8():
     th = np.linspace(0.0, 2 * math.pi * 45, 20001)
     c = math.cos(ALPHA)
     # Liu's eq. (6) (θ = 2(θ_in + Θ + α_n) for the CS and FS classes, eq. 2) times eq. (8), typed in by hand.
-    mesh = (7.0 * np.sin(2 * (th + 0.4 + ALPHA)) / c + 9.0 * np.sin(2 * (th + 2.1 + ALPHA))
-            + 5.0 * np.sin(2 * (182 / 180 * th - 1.0 + ALPHA)) / c
-            + 3.0 * np.sin(th + 0.7) / c + 2.5 * np.sin(364 * th + 1.9))
+    mesh = (
+        7.0 * np.sin(2 * (th + 0.4 + ALPHA)) / c
+        + 9.0 * np.sin(2 * (th + 2.1 + ALPHA))
+        + 5.0 * np.sin(2 * (182 / 180 * th - 1.0 + ALPHA)) / c
+        + 3.0 * np.sin(th + 0.7) / c
+        + 2.5 * np.sin(364 * th + 1.9)
+    )
     ref = 0.9 / math.sqrt(30.0) * 412.8 / 90.0 / ARCSEC * mesh
     got = np.asarray(gearte.evaluate(drive.signal(errs), jnp.asarray(th)))
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10 * np.max(np.abs(ref)))  # sin(364θ) at θ ~ 300 rad
@@ -186,8 +198,12 @@ def test_monte_carlo_block_size_from_the_slow_classes(drive4):
 
 
 def cs_fs_drive(e_cs=9.0, e_fs=4.0):
-    drive = HarmonicDrive(180, 182, [HarmonicSource("cs", "circular_spline", tolerance=2 * e_cs),
-                                     HarmonicSource("fs", "flexspline", tolerance=2 * e_fs)], pitch_diameter=90.0)
+    drive = HarmonicDrive(
+        180,
+        182,
+        [HarmonicSource("cs", "circular_spline", tolerance=2 * e_cs), HarmonicSource("fs", "flexspline", tolerance=2 * e_fs)],
+        pitch_diameter=90.0,
+    )
     return drive, {"cs": Eccentricity(e_cs, 0.3), "fs": Eccentricity(e_fs, 1.7)}
 
 
@@ -264,12 +280,17 @@ def test_labelled_lines_of_a_harmonic_record(drive4):
 
 
 def test_statistical_estimate_by_hand():
-    src = [HarmonicSource("fp1", "flexspline", kind="cumulative_pitch", tolerance=20),
-           HarmonicSource("fp2", "circular_spline", kind="cumulative_pitch", tolerance=25),
-           HarmonicSource("fi1", "tooth", tolerance=8), HarmonicSource("fi2", "tooth", tolerance=9),
-           HarmonicSource("e21", "circular_spline", tolerance=12), HarmonicSource("e22", "circular_spline", tolerance=30),
-           HarmonicSource("e11", "flexspline", tolerance=10),
-           HarmonicSource("e31", "wave_generator", tolerance=6), HarmonicSource("e32", "wave_generator", tolerance=15)]
+    src = [
+        HarmonicSource("fp1", "flexspline", kind="cumulative_pitch", tolerance=20),
+        HarmonicSource("fp2", "circular_spline", kind="cumulative_pitch", tolerance=25),
+        HarmonicSource("fi1", "tooth", tolerance=8),
+        HarmonicSource("fi2", "tooth", tolerance=9),
+        HarmonicSource("e21", "circular_spline", tolerance=12),
+        HarmonicSource("e22", "circular_spline", tolerance=30),
+        HarmonicSource("e11", "flexspline", tolerance=10),
+        HarmonicSource("e31", "wave_generator", tolerance=6),
+        HarmonicSource("e32", "wave_generator", tolerance=15),
+    ]
     drive = HarmonicDrive(180, 182, src, pitch_diameter=90.0, k_b=0.9)
     c2 = math.cos(math.radians(20)) ** 2
     # Eq. (7): ½√(F_p1² + F_p2² + f′₁² + f′₂² + ΣE²/cos²α) = ½√(400 + 625 + 64 + 81 + 1405/cos²20°)
@@ -284,7 +305,8 @@ def test_statistical_estimate_by_hand():
     assert est.arcsec == pytest.approx(18.026, abs=1e-3)  # 0.9/6.01664 × 26.2732 × 4.58667, by hand
     # Replaced tolerances.
     assert statistical_estimate(drive, tolerances_um={"e22": 0.0}).delta_um == pytest.approx(
-        0.5 * math.sqrt(400 + 625 + 64 + 81 + (144 + 100 + 36 + 225) / c2), rel=1e-13)
+        0.5 * math.sqrt(400 + 625 + 64 + 81 + (144 + 100 + 36 + 225) / c2), rel=1e-13
+    )
 
 
 class _AtInstant(eqx.Module):  # key → TE at θ = 1.234 rad
@@ -308,8 +330,11 @@ def test_monte_carlo_instant_te_meets_the_estimate(drive4, study4):
 def test_monte_carlo_peak_to_peak_of_one_class_against_the_estimate():
     # One class, several sources: their resultant phasor is 2-D normal, so its length is Rayleigh with
     # σ² = Σσ_i², and p2p = 2·length. P99.73(p2p) = 2σ√(−2 ln 0.0027) while the estimate is 3σ.
-    src = [HarmonicSource("a", "circular_spline", tolerance=20), HarmonicSource("b", "circular_spline", tolerance=12),
-           HarmonicSource("c", "circular_spline", kind="cumulative_pitch", tolerance=25)]
+    src = [
+        HarmonicSource("a", "circular_spline", tolerance=20),
+        HarmonicSource("b", "circular_spline", tolerance=12),
+        HarmonicSource("c", "circular_spline", kind="cumulative_pitch", tolerance=25),
+    ]
     drive = HarmonicDrive(180, 182, src, pitch_diameter=90.0)
     study = gearte.TEStudy(drive, rayleigh_model(drive), metric=gearte.PeakToPeak())
     # 20,000 samples: the standard error of P99.73 of a Rayleigh law is 1.1 % of it (tolerance 4 %).
@@ -378,8 +403,9 @@ def test_assembly_reports_its_result_and_throws():
         optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, max_steps=16)
 
 
-@pytest.mark.parametrize("adjustable,msg", [([], "at least one"), (["nope"], "not sources"), (["cs_a", "cs_a"], "repeated"),
-                                            (["t"], "tooth-to-tooth")])
+@pytest.mark.parametrize(
+    "adjustable,msg", [([], "at least one"), (["nope"], "not sources"), (["cs_a", "cs_a"], "repeated"), (["t"], "tooth-to-tooth")]
+)
 def test_assembly_bad_adjustable(adjustable, msg):
     src = [HarmonicSource("cs_a", "circular_spline", tolerance=20), HarmonicSource("t", "tooth", tolerance=5)]
     drive = HarmonicDrive(180, 182, src, pitch_diameter=90.0)
@@ -403,17 +429,23 @@ def test_only_double_wave(waves):
         four_class_drive(180, 186, waves=waves)
 
 
-@pytest.mark.parametrize("make,msg", [
-    (lambda: HarmonicSource("x", "circular_spline", tolerance=-1.0), "cannot be negative"),
-    (lambda: HarmonicSource("x", "planet", tolerance=1.0), "class must be one of"),
-    (lambda: HarmonicSource("x", "wave_generator", kind="cumulative_pitch", tolerance=1.0), "cannot be in the wave_generator"),
-    (lambda: HarmonicSource("x", "circular_spline", kind="tooth_to_tooth", tolerance=1.0), "takes"),
-    (lambda: HarmonicSource("x", "flexspline", kind="eccentric", tolerance=1.0), "kind must be one of"),
-    (lambda: HarmonicDrive(180, 182, [HarmonicSource("x", "tooth", tolerance=1)] * 2, pitch_diameter=90), "unique"),
-    (lambda: HarmonicDrive(180, 182, [HarmonicSource("x", "tooth", tolerance=1)], pitch_diameter=-90), "pitch_diameter"),
-    (lambda: HarmonicDrive(180, 182, [HarmonicSource("x", "tooth", tolerance=1)], pitch_diameter=90, pressure_angle=20.0), "pressure_angle"),
-    (lambda: gearte.record(to_signal(Components([1.0], [0.0], [1])), input_rpm=-1, duration_s=1, sample_rate_hz=100), "input_rpm"),
-])
+@pytest.mark.parametrize(
+    "make,msg",
+    [
+        (lambda: HarmonicSource("x", "circular_spline", tolerance=-1.0), "cannot be negative"),
+        (lambda: HarmonicSource("x", "planet", tolerance=1.0), "class must be one of"),
+        (lambda: HarmonicSource("x", "wave_generator", kind="cumulative_pitch", tolerance=1.0), "cannot be in the wave_generator"),
+        (lambda: HarmonicSource("x", "circular_spline", kind="tooth_to_tooth", tolerance=1.0), "takes"),
+        (lambda: HarmonicSource("x", "flexspline", kind="eccentric", tolerance=1.0), "kind must be one of"),
+        (lambda: HarmonicDrive(180, 182, [HarmonicSource("x", "tooth", tolerance=1)] * 2, pitch_diameter=90), "unique"),
+        (lambda: HarmonicDrive(180, 182, [HarmonicSource("x", "tooth", tolerance=1)], pitch_diameter=-90), "pitch_diameter"),
+        (
+            lambda: HarmonicDrive(180, 182, [HarmonicSource("x", "tooth", tolerance=1)], pitch_diameter=90, pressure_angle=20.0),
+            "pressure_angle",
+        ),
+        (lambda: gearte.record(to_signal(Components([1.0], [0.0], [1])), input_rpm=-1, duration_s=1, sample_rate_hz=100), "input_rpm"),
+    ],
+)
 def test_bad_inputs(make, msg):
     with pytest.raises(ValueError, match=msg):
         make()
@@ -452,14 +484,21 @@ def test_config_ok_and_tolerance_from_the_drive(tmp_path):
     assert isinstance(st.drive, HarmonicDrive) and float(st.errors.sources["cs"].magnitude.scale) == pytest.approx(20 / 6)
 
 
-@pytest.mark.parametrize("old,new,msg", [
-    ("tolerance_um = 20\n", "tolerance_um = 20\nkind = 'tooth_to_tooth'\n", r"\[\[drive.sources\]\] #1 \(cs\): HarmonicSource 'cs': a 'tooth_to_tooth' source cannot"),
-    ("pitch_diameter_mm = 90\n", "pitch_diameter_mm = 90\nwaves = 4\n", r"\[drive\]: waves: only double-wave"),
-    ("z_circular_spline = 182", "z_circular_spline = 180", "z_circular_spline > z_flexspline"),
-    ("z_circular_spline = 182", "z_circular_spline = 179", "z_circular_spline > z_flexspline"),
-    ("pitch_diameter_mm = 90\n", "", "missing required key `pitch_diameter_mm`"),
-    ("pitch_diameter_mm = 90\n", "pitch_diameter_mm = 90\n[drive.record]\ninput_rpm = 184\nduration_s = 10\n", "sample_rate_hz"),
-])
+@pytest.mark.parametrize(
+    "old,new,msg",
+    [
+        (
+            "tolerance_um = 20\n",
+            "tolerance_um = 20\nkind = 'tooth_to_tooth'\n",
+            r"\[\[drive.sources\]\] #1 \(cs\): HarmonicSource 'cs': a 'tooth_to_tooth' source cannot",
+        ),
+        ("pitch_diameter_mm = 90\n", "pitch_diameter_mm = 90\nwaves = 4\n", r"\[drive\]: waves: only double-wave"),
+        ("z_circular_spline = 182", "z_circular_spline = 180", "z_circular_spline > z_flexspline"),
+        ("z_circular_spline = 182", "z_circular_spline = 179", "z_circular_spline > z_flexspline"),
+        ("pitch_diameter_mm = 90\n", "", "missing required key `pitch_diameter_mm`"),
+        ("pitch_diameter_mm = 90\n", "pitch_diameter_mm = 90\n[drive.record]\ninput_rpm = 184\nduration_s = 10\n", "sample_rate_hz"),
+    ],
+)
 def test_config_errors(tmp_path, old, new, msg):
     text = _config(tmp_path).read_text()
     assert old in text
@@ -490,8 +529,10 @@ def _estimate_from_toml(path):
     cfg = tomllib.loads(path.read_text(encoding="utf-8"))
     d = cfg["drive"]
     c2 = math.cos(math.radians(d["pressure_angle_deg"])) ** 2
-    s = sum(src["tolerance_um"] ** 2 / (c2 if src.get("kind", "runout") == "runout" and src["class"] != "tooth" else 1.0)
-            for src in d["sources"])
+    s = sum(
+        src["tolerance_um"] ** 2 / (c2 if src.get("kind", "runout") == "runout" and src["class"] != "tooth" else 1.0)
+        for src in d["sources"]
+    )
     n = 0.1 * (d["z_flexspline"] + d["z_circular_spline"])
     return d.get("K_b", 1.0) / math.sqrt(n) * 0.5 * math.sqrt(s) * 412.8 / d["pitch_diameter_mm"] / 60
 
@@ -499,8 +540,12 @@ def _estimate_from_toml(path):
 @pytest.mark.slow
 def test_gearte_run_harmonic_example(tmp_path):
     out = tmp_path / "harmonic"
-    r = subprocess.run([sys.executable, "-m", "gearte", "run", str(EXAMPLE), "--out", str(out), "--samples", "300"],
-                       capture_output=True, text=True, cwd=ROOT)
+    r = subprocess.run(
+        [sys.executable, "-m", "gearte", "run", str(EXAMPLE), "--out", str(out), "--samples", "300"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert s["estimate_arcmin"] == pytest.approx(_estimate_from_toml(EXAMPLE), rel=1e-12)

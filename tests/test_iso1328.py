@@ -56,8 +56,7 @@ ROUNDED_1995_G0 = {"f_pt": 1.0, "F_p": 3.3, "F_alpha": 1.4, "F_beta": 1.5, "F_r"
 GEAR_1995 = dict(module=3.0, diameter=80.0, face_width=30.0)
 
 
-@pytest.mark.parametrize("grade,expected", [(5, ROUNDED_2013_G5), (8, ROUNDED_2013_G8), (1, ROUNDED_2013_G1),
-                                            (11, ROUNDED_2013_G11)])
+@pytest.mark.parametrize("grade,expected", [(5, ROUNDED_2013_G5), (8, ROUNDED_2013_G8), (1, ROUNDED_2013_G1), (11, ROUNDED_2013_G11)])
 def test_2013_rounded_values_by_hand(grade, expected):
     assert gearte.iso1328_tolerances(standard=S2013, grade=grade, **GEAR_2013) == expected
 
@@ -85,8 +84,7 @@ def test_1995_published_table_rows():
     for d, m in [(5.0, 0.5), (10.0, 1.0), (20.0, 2.0), (13.3, 1.7)]:  # anywhere in the cell, limits included
         got = [gearte.iso1328_tolerances(standard=S1995, module=m, diameter=d, grade=q)["F_p"] for q in range(13)]
         assert got == F_p_row
-        assert [gearte.iso1328_tolerances(standard=S1995, module=m, diameter=d, grade=q)["f_pt"]
-                for q in range(5, 10)] == f_pt_row
+        assert [gearte.iso1328_tolerances(standard=S1995, module=m, diameter=d, grade=q)["f_pt"] for q in range(5, 10)] == f_pt_row
     # Scaling the rounded grade-5 value (11 µm) would give 22 at grade 7 and 88 at grade 11,
     # not the tabulated 23 and 90: the unrounded value is scaled, then rounded.
     assert round(11.0 * 2.0) == 22 and round(11.0 * 8.0) == 88
@@ -103,6 +101,7 @@ def test_1995_range_limits_belong_to_the_lower_range():
     # m = 2 is in 0.5 ≤ m ≤ 2 (mean 1); m just above 2 is in 2 < m ≤ 3.5 (mean √7).
     assert f_pt(2.0, 10.0) == pytest.approx(0.3 * (1.0 + 0.4 * math.sqrt(10.0)) + 4.0, rel=1e-12)
     assert f_pt(2.0001, 10.0) == pytest.approx(0.3 * (math.sqrt(7.0) + 0.4 * math.sqrt(10.0)) + 4.0, rel=1e-12)
+
     # b = 10 is in 4 ≤ b ≤ 10 (mean √40), b = 10.5 in 10 < b ≤ 20 (mean √200); d = 10 → √d = √10.
     def F_beta(b):
         return float(gearte.iso1328_tolerance("F_beta", standard=S1995, module=1.0, diameter=10.0, face_width=b, grade=5))
@@ -121,10 +120,25 @@ def test_2013_uses_the_gear_itself_not_range_means():
     assert a == pytest.approx(5.82, rel=1e-12) and b - a == pytest.approx(0.4e-4, rel=1e-6)
 
 
-@pytest.mark.parametrize("value,expected", [
-    (10.49, 10.0), (10.5, 11.0), (10.0001, 10.0), (10.0, 10.0), (9.76, 10.0), (9.74, 9.5), (7.25, 7.5), (5.0, 5.0),
-    (5.2, 5.0), (4.96, 5.0), (4.94, 4.9), (0.84, 0.8), (0.0, 0.0), (123.5, 124.0),
-])
+@pytest.mark.parametrize(
+    "value,expected",
+    [
+        (10.49, 10.0),
+        (10.5, 11.0),
+        (10.0001, 10.0),
+        (10.0, 10.0),
+        (9.76, 10.0),
+        (9.74, 9.5),
+        (7.25, 7.5),
+        (5.0, 5.0),
+        (5.2, 5.0),
+        (4.96, 5.0),
+        (4.94, 4.9),
+        (0.84, 0.8),
+        (0.0, 0.0),
+        (123.5, 124.0),
+    ],
+)
 def test_round_tolerance(value, expected):
     assert gearte.round_tolerance(value) == expected
 
@@ -225,38 +239,39 @@ def _tol(**kw):
     return lambda: gearte.iso1328_tolerances(**base)
 
 
-@pytest.mark.parametrize("make,match", [
-    (_tol(standard="1328-1:2008"), "standard: expected one of"),
-    (_tol(module=0.4), r"module = 0.4 mm is outside the range of ISO 1328-1:2013: 0.5 ≤ m ≤ 70"),
-    (_tol(module=71.0), r"0.5 ≤ m ≤ 70"),
-    (_tol(diameter=4.0), r"5 ≤ d ≤ 15000"),
-    (_tol(diameter=15001.0), r"5 ≤ d ≤ 15000"),
-    (_tol(face_width=3.0), r"4 ≤ b ≤ 1200"),
-    (_tol(face_width=1300.0), r"4 ≤ b ≤ 1200"),
-    (_tol(standard=S1995, diameter=12000.0), r"ISO 1328-1:1995: 5 ≤ d ≤ 10000"),
-    (_tol(standard=S1995, face_width=1100.0), r"4 ≤ b ≤ 1000"),
-    (_tol(module=float("nan")), "module: must be finite"),
-    (_tol(diameter="big"), "diameter: expected a number"),
-    (_tol(grade=0), "grade 0 is outside ISO 1328-1:2013's grades 1"),
-    (_tol(grade=12), "grade 12 is outside"),
-    (_tol(standard=S1995, grade=13), "grade 13 is outside ISO 1328-1:1995's grades 0"),
-    (_tol(standard=S1995, grade=-1), "grade -1 is outside"),
-    (_tol(grade=5.5), "whole grades only"),
-    (_tol(grade=True), "whole number"),
-    (_tol(grade=float("inf")), "whole grades only"),
-    (_tol(teeth=4), r"5 ≤ z ≤ 1000"),
-    (_tol(teeth=1001), r"5 ≤ z ≤ 1000"),
-    (_tol(teeth=20.5), "teeth: expected a whole number"),
-    (lambda: gearte.iso1328_tolerance("F_x", standard=S2013, module=2.0, diameter=50.0, grade=5.0), "quantity"),
-    (lambda: gearte.iso1328_tolerance("F_p", standard=S2013, module=2.0, diameter=50.0, grade=float("nan")),
-     "grade: must be finite"),
-    (lambda: gearte.grade_for_tolerance(0.0, quantity="F_p", standard=S2013, module=2.0, diameter=50.0), "> 0"),
-    (lambda: gearte.grade_for_tolerance(np.array([3.0, -1.0]), quantity="F_p", standard=S2013, module=2.0,
-                                        diameter=50.0), "> 0"),
-    (lambda: gearte.nearest_grade(float("nan"), quantity="F_p", standard=S2013, module=2.0, diameter=50.0), "> 0"),
-    (lambda: gearte.nearest_grade(-3.0, quantity="F_p", standard=S2013, module=2.0, diameter=50.0), "> 0"),
-    (lambda: gearte.round_tolerance(-0.1), "≥ 0"),
-])
+@pytest.mark.parametrize(
+    "make,match",
+    [
+        (_tol(standard="1328-1:2008"), "standard: expected one of"),
+        (_tol(module=0.4), r"module = 0.4 mm is outside the range of ISO 1328-1:2013: 0.5 ≤ m ≤ 70"),
+        (_tol(module=71.0), r"0.5 ≤ m ≤ 70"),
+        (_tol(diameter=4.0), r"5 ≤ d ≤ 15000"),
+        (_tol(diameter=15001.0), r"5 ≤ d ≤ 15000"),
+        (_tol(face_width=3.0), r"4 ≤ b ≤ 1200"),
+        (_tol(face_width=1300.0), r"4 ≤ b ≤ 1200"),
+        (_tol(standard=S1995, diameter=12000.0), r"ISO 1328-1:1995: 5 ≤ d ≤ 10000"),
+        (_tol(standard=S1995, face_width=1100.0), r"4 ≤ b ≤ 1000"),
+        (_tol(module=float("nan")), "module: must be finite"),
+        (_tol(diameter="big"), "diameter: expected a number"),
+        (_tol(grade=0), "grade 0 is outside ISO 1328-1:2013's grades 1"),
+        (_tol(grade=12), "grade 12 is outside"),
+        (_tol(standard=S1995, grade=13), "grade 13 is outside ISO 1328-1:1995's grades 0"),
+        (_tol(standard=S1995, grade=-1), "grade -1 is outside"),
+        (_tol(grade=5.5), "whole grades only"),
+        (_tol(grade=True), "whole number"),
+        (_tol(grade=float("inf")), "whole grades only"),
+        (_tol(teeth=4), r"5 ≤ z ≤ 1000"),
+        (_tol(teeth=1001), r"5 ≤ z ≤ 1000"),
+        (_tol(teeth=20.5), "teeth: expected a whole number"),
+        (lambda: gearte.iso1328_tolerance("F_x", standard=S2013, module=2.0, diameter=50.0, grade=5.0), "quantity"),
+        (lambda: gearte.iso1328_tolerance("F_p", standard=S2013, module=2.0, diameter=50.0, grade=float("nan")), "grade: must be finite"),
+        (lambda: gearte.grade_for_tolerance(0.0, quantity="F_p", standard=S2013, module=2.0, diameter=50.0), "> 0"),
+        (lambda: gearte.grade_for_tolerance(np.array([3.0, -1.0]), quantity="F_p", standard=S2013, module=2.0, diameter=50.0), "> 0"),
+        (lambda: gearte.nearest_grade(float("nan"), quantity="F_p", standard=S2013, module=2.0, diameter=50.0), "> 0"),
+        (lambda: gearte.nearest_grade(-3.0, quantity="F_p", standard=S2013, module=2.0, diameter=50.0), "> 0"),
+        (lambda: gearte.round_tolerance(-0.1), "≥ 0"),
+    ],
+)
 def test_bad_inputs(make, match):
     with pytest.raises(ValueError, match=match):
         make()
@@ -274,9 +289,9 @@ def test_grade_range():
 
 # --- command line ----------------------------------------------------------------------------
 
+
 def test_cli_grade_2013(capsys):
-    assert cli.main(["grade", "--standard", S2013, "--module", "2", "--diameter", "50", "--face-width", "20",
-                     "--grade", "8"]) == 0
+    assert cli.main(["grade", "--standard", S2013, "--module", "2", "--diameter", "50", "--face-width", "20", "--grade", "8"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert {k: out[k] for k in KEYS} == ROUNDED_2013_G8
     assert out["standard"] == S2013 and out["grade"] == 8 and out["module_mm"] == 2.0
@@ -291,22 +306,28 @@ def test_cli_grade_1995_without_face_width(capsys):
     assert {k: out[k] for k in KEYS if k != "F_beta"} == {k: v for k, v in ROUNDED_1995_G7.items() if k != "F_beta"}
 
 
-@pytest.mark.parametrize("args,match", [
-    (["--standard", S2013, "--module", "2", "--diameter", "50", "--grade", "0"], "grade 0 is outside"),
-    (["--standard", S1995, "--module", "100", "--diameter", "50", "--grade", "5"], "0.5 ≤ m ≤ 70"),
-    (["--standard", S2013, "--module", "2", "--diameter", "nan", "--grade", "5"], "diameter: must be finite"),
-])
+@pytest.mark.parametrize(
+    "args,match",
+    [
+        (["--standard", S2013, "--module", "2", "--diameter", "50", "--grade", "0"], "grade 0 is outside"),
+        (["--standard", S1995, "--module", "100", "--diameter", "50", "--grade", "5"], "0.5 ≤ m ≤ 70"),
+        (["--standard", S2013, "--module", "2", "--diameter", "nan", "--grade", "5"], "diameter: must be finite"),
+    ],
+)
 def test_cli_grade_invalid_input(args, match, capsys):
     assert cli.main(["grade", *args]) == 2
     err = capsys.readouterr().err
     assert "gearte: error:" in err and match in err
 
 
-@pytest.mark.parametrize("args", [
-    ["--standard", "1328", "--module", "2", "--diameter", "50", "--grade", "5"],
-    ["--standard", S2013, "--module", "2", "--diameter", "50", "--grade", "5.5"],
-    ["--standard", S2013, "--module", "2", "--diameter", "50"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--standard", "1328", "--module", "2", "--diameter", "50", "--grade", "5"],
+        ["--standard", S2013, "--module", "2", "--diameter", "50", "--grade", "5.5"],
+        ["--standard", S2013, "--module", "2", "--diameter", "50"],
+    ],
+)
 def test_cli_grade_argument_errors_exit_2(args, capsys):
     with pytest.raises(SystemExit) as e:
         cli.main(["grade", *args])

@@ -96,8 +96,9 @@ def test_extrema_exact_linear_in_amplitudes_and_invariant_to_a_shift(comp, c, sh
     # Starting the record elsewhere, φ_j → φ_j + r_j·δ, changes no whole-period metric.
     shifted = phases + np.array([float(f) for f in freqs]) * shift
     for m in METRICS:
-        np.testing.assert_allclose(te_metric(make(amps, shifted, freqs), m), te_metric(base, m),
-                                   rtol=1e-8, atol=1e-10, err_msg=f"shift: {m.name}")
+        np.testing.assert_allclose(
+            te_metric(make(amps, shifted, freqs), m), te_metric(base, m), rtol=1e-8, atol=1e-10, err_msg=f"shift: {m.name}"
+        )
 
 
 def test_extrema_beats_of_near_equal_frequencies():
@@ -194,8 +195,15 @@ def test_smooth_peak_bounds_and_gradient():
     exact = float(gearte.peak(s))
     m = 16 * 21 * 2  # grid points of both signs
     assert exact - 0.02 * exact <= sp <= exact + width * math.log(m)
-    check_grads(lambda a: gearte.smooth_peak(gearte.to_signal(gearte.Components(a, phases, freqs)), width=width),
-                (jnp.asarray(amps),), order=2, modes=["rev"], eps=1e-5, atol=1e-6, rtol=1e-5)
+    check_grads(
+        lambda a: gearte.smooth_peak(gearte.to_signal(gearte.Components(a, phases, freqs)), width=width),
+        (jnp.asarray(amps),),
+        order=2,
+        modes=["rev"],
+        eps=1e-5,
+        atol=1e-6,
+        rtol=1e-5,
+    )
     with pytest.raises(ValueError, match="width"):
         gearte.smooth_peak(s, width=0.0)
 

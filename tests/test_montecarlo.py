@@ -119,8 +119,13 @@ def test_one_compilation_for_repeated_runs():
 
 
 def test_bad_arguments(random_study):
-    for kw, match in ((dict(n_samples=0), "n_samples"), (dict(n_samples=2.5), "n_samples"), (dict(chunk_size=0), "chunk_size"),
-                      (dict(key=-1), "seed"), (dict(key="x"), "key")):
+    for kw, match in (
+        (dict(n_samples=0), "n_samples"),
+        (dict(n_samples=2.5), "n_samples"),
+        (dict(chunk_size=0), "chunk_size"),
+        (dict(key=-1), "seed"),
+        (dict(key="x"), "key"),
+    ):
         args = dict(key=1, n_samples=10) | kw
         with pytest.raises(ValueError, match=match):
             gearte.monte_carlo(random_study, **args)

@@ -27,8 +27,7 @@ def test_notebook_runs(path: Path, monkeypatch: pytest.MonkeyPatch):
     # The kernel inherits this process's environment.
     monkeypatch.setenv("GEARTE_NOTEBOOK_SAMPLES", SAMPLES)
     nb = nbformat.read(path, as_version=4)
-    client = nbclient.NotebookClient(nb, timeout=CELL_TIMEOUT_S, kernel_name="python3",
-                                     resources={"metadata": {"path": str(path.parent)}})
+    client = nbclient.NotebookClient(nb, timeout=CELL_TIMEOUT_S, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}})
     try:
         client.execute()
     except nbclient.exceptions.CellExecutionError as e:

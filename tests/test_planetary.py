@@ -35,8 +35,14 @@ def eq9_numpy(theta, E, ph, planet_freq):
     )
 
 
-SYM = {"sun_manufacturing": ("Es", "bs"), "planet_manufacturing": ("Ep", "bp"), "ring_manufacturing": ("Er", "br"),
-       "sun_assembly": ("As", "gs"), "planet_assembly": ("Ap", "gp"), "carrier_assembly": ("Ac", "gc")}
+SYM = {
+    "sun_manufacturing": ("Es", "bs"),
+    "planet_manufacturing": ("Ep", "bp"),
+    "ring_manufacturing": ("Er", "br"),
+    "sun_assembly": ("As", "gs"),
+    "planet_assembly": ("Ap", "gp"),
+    "carrier_assembly": ("Ac", "gc"),
+}
 
 
 def random_errors(rng, *, n_planets=3, scale=1.0):
@@ -62,7 +68,9 @@ def test_kinematics_of_table1():
     assert f["planet_assembly"] == 0
 
 
-@pytest.mark.parametrize("inp,fixed", [("sun", "ring"), ("ring", "sun"), ("carrier", "ring"), ("sun", "carrier"), ("ring", "carrier"), ("carrier", "sun")])
+@pytest.mark.parametrize(
+    "inp,fixed", [("sun", "ring"), ("ring", "sun"), ("carrier", "ring"), ("sun", "carrier"), ("ring", "carrier"), ("carrier", "sun")]
+)
 def test_willis_for_every_configuration(inp, fixed):
     zs, zr = 12, 84
     w = member_speeds(zs, zr, input=inp, fixed=fixed)
@@ -152,7 +160,7 @@ def test_allocated_te_estimate_and_exact_peak():
 
     (s13, p13), (s72, p24) = grid(13, 13), grid(72, 24)
     both = np.asarray(peak_on_grid(jnp.asarray(np.concatenate([s13, s72])), jnp.asarray(np.concatenate([p13, p24]))))
-    peaks, fine = both[:s13.size], both[s13.size:]
+    peaks, fine = both[: s13.size], both[s13.size :]
     # The exact peak over the hyper-period never exceeds the estimate and, for most β, stays below it ...
     assert np.all(peaks <= estimate * (1 + 1e-9))
     assert np.median(peaks) < estimate - 1.0
@@ -178,12 +186,15 @@ def test_load_sharing_cancels_first_harmonics_of_frame_fixed_and_sun_errors():
     np.testing.assert_allclose(gearte.peak(d_shared.signal(errs)), gearte.peak(d_single.signal(errs)) / 3, rtol=1e-12)
 
 
-@pytest.mark.parametrize("inp,out,fixed,radius", [
-    ("sun", "carrier", "ring", lambda rbs, rbr: rbs + rbr),
-    ("sun", "ring", "carrier", lambda rbs, rbr: -rbr),
-    ("ring", "sun", "carrier", lambda rbs, rbr: -rbs),
-    ("carrier", "sun", "ring", lambda rbs, rbr: -rbs),
-])
+@pytest.mark.parametrize(
+    "inp,out,fixed,radius",
+    [
+        ("sun", "carrier", "ring", lambda rbs, rbr: rbs + rbr),
+        ("sun", "ring", "carrier", lambda rbs, rbr: -rbr),
+        ("ring", "sun", "carrier", lambda rbs, rbr: -rbs),
+        ("carrier", "sun", "ring", lambda rbs, rbr: -rbs),
+    ],
+)
 def test_output_gain_per_configuration(inp, out, fixed, radius):
     # A planet assembly error is a constant e_w + e_n = A[sin(γ + α) + sin(γ − α)] = 2A sin γ cos α.
     m, a = 2.0, math.radians(20)
@@ -192,8 +203,7 @@ def test_output_gain_per_configuration(inp, out, fixed, radius):
     errs["planet_assembly"] = gearte.Eccentricity(np.full(4, 5.0), np.full(4, 0.9))
     rbs, rbr = m * 20 * math.cos(a) / 2, m * 80 * math.cos(a) / 2
     expected = 2 * 5.0 * math.sin(0.9) * math.cos(a) * 1e-3 / radius(rbs, rbr)
-    np.testing.assert_allclose(float(d.signal(errs).offset),
-                               expected, rtol=1e-12)
+    np.testing.assert_allclose(float(d.signal(errs).offset), expected, rtol=1e-12)
 
 
 def test_profile_shifted_working_angles():
@@ -203,19 +213,22 @@ def test_profile_shifted_working_angles():
     np.testing.assert_allclose(float(d.working_angle_internal), math.acos(49 * math.cos(a0) / (2 * 24.4)), rtol=1e-12)
 
 
-@pytest.mark.parametrize("kwargs,match", [
-    (dict(z_sun=12, z_planet=36, z_ring=85), "z_ring = z_sun"),
-    (dict(z_sun=13, z_planet=36, z_ring=85, n_planets=3), "cannot be assembled"),
-    (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=6), "clash"),
-    (dict(z_sun=12.5, z_planet=36, z_ring=84), "whole number"),
-    (dict(z_sun=0, z_planet=36, z_ring=84), "z_sun"),
-    (dict(z_sun=12, z_planet=36, z_ring=84, module=float("nan")), "module"),
-    (dict(z_sun=12, z_planet=36, z_ring=84, module=-1.0), "module"),
-    (dict(z_sun=12, z_planet=36, z_ring=84, pressure_angle=20.0), "pressure_angle"),
-    (dict(z_sun=12, z_planet=36, z_ring=84, output="sun"), "input, output, fixed"),
-    (dict(z_sun=12, z_planet=36, z_ring=84, coupling="mean"), "coupling"),
-    (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=3, planet_angles=[0.0, 1.0]), "planet_angles"),
-])
+@pytest.mark.parametrize(
+    "kwargs,match",
+    [
+        (dict(z_sun=12, z_planet=36, z_ring=85), "z_ring = z_sun"),
+        (dict(z_sun=13, z_planet=36, z_ring=85, n_planets=3), "cannot be assembled"),
+        (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=6), "clash"),
+        (dict(z_sun=12.5, z_planet=36, z_ring=84), "whole number"),
+        (dict(z_sun=0, z_planet=36, z_ring=84), "z_sun"),
+        (dict(z_sun=12, z_planet=36, z_ring=84, module=float("nan")), "module"),
+        (dict(z_sun=12, z_planet=36, z_ring=84, module=-1.0), "module"),
+        (dict(z_sun=12, z_planet=36, z_ring=84, pressure_angle=20.0), "pressure_angle"),
+        (dict(z_sun=12, z_planet=36, z_ring=84, output="sun"), "input, output, fixed"),
+        (dict(z_sun=12, z_planet=36, z_ring=84, coupling="mean"), "coupling"),
+        (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=3, planet_angles=[0.0, 1.0]), "planet_angles"),
+    ],
+)
 def test_bad_drives_are_rejected_clearly(kwargs, match):
     base = dict(module=1.0, n_planets=3)
     base.update(kwargs)
@@ -259,7 +272,7 @@ def test_te_is_linear_in_small_errors_and_differentiable():
         e, i = {}, 0
         for k in names:
             c = errs[k].phase.size
-            e[k] = gearte.Eccentricity(errs[k].magnitude, ph[i:i + c].reshape(errs[k].phase.shape))
+            e[k] = gearte.Eccentricity(errs[k].magnitude, ph[i : i + c].reshape(errs[k].phase.shape))
             i += c
         return gearte.peak(d.signal(e))
 

@@ -48,9 +48,13 @@ def test_additive_case_matches_the_closed_form():
     # Crests aligned at θ = π/2: sin θ and sin(3θ + π) both reach +1 there (and −1 at 3π/2), so the
     # exact peak is g (X_a + X_b): additive. X_a ~ U(0, 10), X_b ~ U(5, 25): variances 100/12 and 400/12,
     # so S_a = S_Ta = 0.2 and S_b = S_Tb = 0.8.
-    st = study([("a", 1, 0.0), ("b", 3, math.pi)],
-               {"a": gearte.ErrorSource(gearte.Uniform(0.0, 10.0), gearte.FixedPhase(0.0)),
-                "b": gearte.ErrorSource(gearte.Uniform(5.0, 25.0), gearte.FixedPhase(0.0))})
+    st = study(
+        [("a", 1, 0.0), ("b", 3, math.pi)],
+        {
+            "a": gearte.ErrorSource(gearte.Uniform(0.0, 10.0), gearte.FixedPhase(0.0)),
+            "b": gearte.ErrorSource(gearte.Uniform(5.0, 25.0), gearte.FixedPhase(0.0)),
+        },
+    )
     r = sobol_indices(st, key=3, n=2048)
     assert r.inputs == ("a.magnitude", "b.magnitude")  # fixed phases are not inputs
     np.testing.assert_allclose(r.first_order, [0.2, 0.8], atol=0.01)
@@ -76,9 +80,13 @@ def _numpy_pick_freeze(f, sample, n, groups, rng):
 
 def test_interacting_inputs_against_an_independent_numpy_estimate():
     # a sin θ + b sin(θ + φ) has peak |a + b e^{iφ}|: the magnitudes and b's phase interact.
-    st = study([("a", 1, 0.0), ("b", 1, 0.0)],
-               {"a": gearte.ErrorSource(gearte.Uniform(2.0, 6.0), gearte.FixedPhase(0.0)),
-                "b": gearte.ErrorSource(gearte.Rayleigh(2.0, truncate_at=5.0), gearte.UniformPhase())})
+    st = study(
+        [("a", 1, 0.0), ("b", 1, 0.0)],
+        {
+            "a": gearte.ErrorSource(gearte.Uniform(2.0, 6.0), gearte.FixedPhase(0.0)),
+            "b": gearte.ErrorSource(gearte.Rayleigh(2.0, truncate_at=5.0), gearte.UniformPhase()),
+        },
+    )
     r = sobol_indices(st, key=11, n=4096)
     assert r.inputs == ("a.magnitude", "b.magnitude", "b.phase")
 
@@ -107,8 +115,14 @@ def test_interacting_inputs_against_an_independent_numpy_estimate():
 def test_per_planet_sources_give_one_magnitude_and_one_phase_input_per_planet(coupling):
     d = Planetary2KH(12, 36, 84, module=1.0, pressure_angle=math.pi / 9, n_planets=3, coupling=coupling)
     law = lambda t: gearte.Rayleigh(t / 2, truncate_at=t)
-    tol = {"sun_manufacturing": 13, "planet_manufacturing": 16, "ring_manufacturing": 21, "sun_assembly": 12,
-           "planet_assembly": 8, "carrier_assembly": 15}
+    tol = {
+        "sun_manufacturing": 13,
+        "planet_manufacturing": 16,
+        "ring_manufacturing": 21,
+        "sun_assembly": 12,
+        "planet_assembly": 8,
+        "carrier_assembly": 15,
+    }
     model = gearte.ErrorModel({k: gearte.ErrorSource(law(v), gearte.UniformPhase()) for k, v in tol.items()}, d.error_sources)
     r = sobol_indices(gearte.TEStudy(d, model), key=5, n=256)
     # 4 single sources × 2 inputs + 2 per-planet sources × (3 + 3) inputs.
@@ -135,8 +149,13 @@ def test_rule_bound_phases_are_not_inputs_and_follow_their_datum():
 
 
 def test_reproducible_from_the_seed():
-    st = study([("a", 1, 0.0), ("b", 2, 0.0)], {"a": gearte.ErrorSource(gearte.Rayleigh(2.0), gearte.UniformPhase()),
-                                                 "b": gearte.ErrorSource(gearte.Normal(5.0, 1.0), gearte.UniformPhase())})
+    st = study(
+        [("a", 1, 0.0), ("b", 2, 0.0)],
+        {
+            "a": gearte.ErrorSource(gearte.Rayleigh(2.0), gearte.UniformPhase()),
+            "b": gearte.ErrorSource(gearte.Normal(5.0, 1.0), gearte.UniformPhase()),
+        },
+    )
     r1, r2 = sobol_indices(st, key=42, n=128), sobol_indices(st, key=42, n=128)
     np.testing.assert_array_equal(r1.first_order, r2.first_order)
     np.testing.assert_array_equal(r1.total_order, r2.total_order)
@@ -152,10 +171,14 @@ def test_reproducible_from_the_seed():
 def test_bootstrap_intervals():
     # The additive case above (S_a = 0.2, S_b = 0.8) and a source c of zero magnitude whose random
     # phase therefore changes nothing: its indices are 0 in every resample, a degenerate interval.
-    st = study([("a", 1, 0.0), ("b", 3, math.pi), ("c", 2, 0.0)],
-               {"a": gearte.ErrorSource(gearte.Uniform(0.0, 10.0), gearte.FixedPhase(0.0)),
-                "b": gearte.ErrorSource(gearte.Uniform(5.0, 25.0), gearte.FixedPhase(0.0)),
-                "c": gearte.ErrorSource(0.0, gearte.UniformPhase())})
+    st = study(
+        [("a", 1, 0.0), ("b", 3, math.pi), ("c", 2, 0.0)],
+        {
+            "a": gearte.ErrorSource(gearte.Uniform(0.0, 10.0), gearte.FixedPhase(0.0)),
+            "b": gearte.ErrorSource(gearte.Uniform(5.0, 25.0), gearte.FixedPhase(0.0)),
+            "c": gearte.ErrorSource(0.0, gearte.UniformPhase()),
+        },
+    )
     r = sobol_indices(st, key=2, n=256, confidence_level=0.9, n_resamples=200)
     assert r.inputs == ("a.magnitude", "b.magnitude", "c.phase")
     assert r.first_order_ci.shape == (3, 2) and r.total_order_ci.shape == (3, 2)
@@ -172,10 +195,18 @@ def test_bootstrap_intervals():
 def two_source_problem():
     d = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 3)], gain=GAIN)
     law = lambda t: gearte.Rayleigh(t / 2, truncate_at=t)
-    model = gearte.ErrorModel({"a": gearte.ErrorSource(law(10.0), gearte.UniformPhase()),
-                               "b": gearte.ErrorSource(law(20.0), gearte.UniformPhase())}, d.error_sources)
-    return budget_problem(d, model, costs={"a": gearte.Reciprocal(0.0, 1.0), "b": gearte.Reciprocal(0.0, 1.0)},
-                          nominal={"a": 10.0, "b": 20.0}, spec=20 * GAIN, statistic=gearte.Yield(0.99))
+    model = gearte.ErrorModel(
+        {"a": gearte.ErrorSource(law(10.0), gearte.UniformPhase()), "b": gearte.ErrorSource(law(20.0), gearte.UniformPhase())},
+        d.error_sources,
+    )
+    return budget_problem(
+        d,
+        model,
+        costs={"a": gearte.Reciprocal(0.0, 1.0), "b": gearte.Reciprocal(0.0, 1.0)},
+        nominal={"a": 10.0, "b": 20.0},
+        spec=20 * GAIN,
+        statistic=gearte.Yield(0.99),
+    )
 
 
 def budget_study(p):
@@ -208,8 +239,9 @@ def test_sensitivity_table_puts_contributions_and_sobol_side_by_side():
     assert t.sources == ["a", "b"]
     k_grad, k_sobol = jax.random.split(jax.random.key(6))
     assert t.contribution == contributions(p, tol, key=k_grad, n_samples=1024)
-    np.testing.assert_array_equal(t.sobol.total_order, sobol_indices(budget_study(p), key=k_sobol, n=256,
-                                                                     scale=tolerance_scale(p, tol)).total_order)
+    np.testing.assert_array_equal(
+        t.sobol.total_order, sobol_indices(budget_study(p), key=k_sobol, n=256, scale=tolerance_scale(p, tol)).total_order
+    )
     np.testing.assert_allclose(sum(r["contribution_rad"] for r in t.rows()), t.statistic, rtol=1e-12)
     np.testing.assert_allclose(sum(r["share"] for r in t.rows()), 1.0, rtol=1e-12)
     assert {r["source"]: r["sobol_total_order"] for r in t.rows()} == t.sobol.source_total_order

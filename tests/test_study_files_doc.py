@@ -24,8 +24,15 @@ from gearte.drives import DRIVES
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "study-files.md"
 #: Tables whose keys are names of error sources (or, for the top level, tables), not schema keys.
-NAME_TABLES = {"study file", "[errors]", "[budget.costs]", "[budget.grades]", "[allocation.seed_rule]", "[budget] cost_model",
-               "[budget.costs.NAME.costs_by_grade]"}
+NAME_TABLES = {
+    "study file",
+    "[errors]",
+    "[budget.costs]",
+    "[budget.grades]",
+    "[allocation.seed_rule]",
+    "[budget] cost_model",
+    "[budget.costs.NAME.costs_by_grade]",
+}
 ANGLE = r"(deg|rad|arcmin|arcsec)"
 
 
@@ -66,33 +73,74 @@ def _variants() -> list[tuple[str, str]]:
     sun = 'tolerance_um = 13\nmagnitude = { law = "fixed" }\nphase = { rule = "uniform" }'
     assert sun in random
     out = []
-    for mag in ('{ law = "fixed", value_um = 3 }', '{ law = "fixed", fraction_of_tolerance = 0.5 }', '{ law = "uniform", low_um = 1 }',
-                '{ law = "normal", mean_um = 5, std_um = 1 }', '{ law = "truncated_normal", mean_um = 5, std_um = 1, high_um = 9 }',
-                '{ law = "rayleigh", scale_um = 4 }', '{ law = "rayleigh", scale_fraction = 0.5, truncate_at_tolerance = true }'):
-        for phase in ('{ rule = "uniform" }', '{ rule = "fixed", value_deg = 30 }', '{ rule = "relative", to = "beta_r", offset_rad = "pi/9" }'):
+    for mag in (
+        '{ law = "fixed", value_um = 3 }',
+        '{ law = "fixed", fraction_of_tolerance = 0.5 }',
+        '{ law = "uniform", low_um = 1 }',
+        '{ law = "normal", mean_um = 5, std_um = 1 }',
+        '{ law = "truncated_normal", mean_um = 5, std_um = 1, high_um = 9 }',
+        '{ law = "rayleigh", scale_um = 4 }',
+        '{ law = "rayleigh", scale_fraction = 0.5, truncate_at_tolerance = true }',
+    ):
+        for phase in (
+            '{ rule = "uniform" }',
+            '{ rule = "fixed", value_deg = 30 }',
+            '{ rule = "relative", to = "beta_r", offset_rad = "pi/9" }',
+        ):
             out.append(("planetary_2kh", random.replace(sun, f"tolerance_um = 13\nmagnitude = {mag}\nphase = {phase}")))
-    budget = "\n[budget]\nsources = [\"sun_manufacturing\", \"ring_manufacturing\"]\n[[budget.constraints]]\nspec = 300.0\ntarget = 0.9\n"
-    for cost in ('model = "reciprocal", a = 0.1, b = 2', 'model = "power", exponent = 2', 'model = "exponential", a = 0, b = 1, k = 0.1',
-                 'model = "grade_table", costs_by_grade = { "5" = 3.0, "6" = 2.0 }, quantity = "F_r", standard = "1328-1:2013", '
-                 'module_mm = 1.0, diameter_mm = 12.0, face_width_mm = 10.0'):
-        out.append(("planetary_2kh", random + budget + "[budget.costs.sun_manufacturing]\n" + cost.replace(", ", "\n").replace('"5" = 3.0\n', '"5" = 3.0, ') + "\n"))
-    out.append(("planetary_2kh", random + "\n[budget]\nspec = 300.0\nconstraint = \"mean_k_sigma\"\ntarget = 3\n"))
+    budget = '\n[budget]\nsources = ["sun_manufacturing", "ring_manufacturing"]\n[[budget.constraints]]\nspec = 300.0\ntarget = 0.9\n'
+    for cost in (
+        'model = "reciprocal", a = 0.1, b = 2',
+        'model = "power", exponent = 2',
+        'model = "exponential", a = 0, b = 1, k = 0.1',
+        'model = "grade_table", costs_by_grade = { "5" = 3.0, "6" = 2.0 }, quantity = "F_r", standard = "1328-1:2013", '
+        "module_mm = 1.0, diameter_mm = 12.0, face_width_mm = 10.0",
+    ):
+        out.append(
+            (
+                "planetary_2kh",
+                random
+                + budget
+                + "[budget.costs.sun_manufacturing]\n"
+                + cost.replace(", ", "\n").replace('"5" = 3.0\n', '"5" = 3.0, ')
+                + "\n",
+            )
+        )
+    out.append(("planetary_2kh", random + '\n[budget]\nspec = 300.0\nconstraint = "mean_k_sigma"\ntarget = 3\n'))
     cycloid = (ROOT / "examples" / "cycloid_yao2001_modified.toml").read_text(encoding="utf-8")
     wheel = re.search(r"\[drive\.wheel\][^\[]*", cycloid)
     assert wheel
-    out.append(("cycloid_pin", cycloid.replace(wheel.group(0), "[drive.modification]\nshift_mm = -0.215\nequidistant_mm = 0.38\n"
-                                                                "rotation_arcsec = 5\n\n")))
+    out.append(
+        (
+            "cycloid_pin",
+            cycloid.replace(wheel.group(0), "[drive.modification]\nshift_mm = -0.215\nequidistant_mm = 0.38\nrotation_arcsec = 5\n\n"),
+        )
+    )
     toy = toy_drive.STUDY
     value = 'value = { law = "uniform", half_width_um = 20, centre_um = 60 }'
     assert value in toy
-    for law in ('{ law = "fixed", value_um = 50 }', '{ law = "uniform", low_um = 40, high_um = 80 }', '{ law = "normal", mean_um = 60, std_um = 5 }',
-                '{ law = "truncated_normal", mean_um = 60, std_um = 5, low_um = 50, high_um = 70 }',
-                '{ law = "rayleigh", scale_um = 5, truncate_at_um = 9 }'):
+    for law in (
+        '{ law = "fixed", value_um = 50 }',
+        '{ law = "uniform", low_um = 40, high_um = 80 }',
+        '{ law = "normal", mean_um = 60, std_um = 5 }',
+        '{ law = "truncated_normal", mean_um = 60, std_um = 5, low_um = 50, high_um = 70 }',
+        '{ law = "rayleigh", scale_um = 5, truncate_at_um = 9 }',
+    ):
         out.append(("toy_gear_pair", toy.replace(value, f"value = {law}")))
-    out.append(("toy_gear_pair", toy + '\n[errors.spacing]\nvalue = { law = "sinusoid", amplitude = { law = "uniform", low_um = 0, high_um = 5 }, '
-                'phase = "uniform", order = 2 }\n[errors.index]\ntolerance_arcsec = 20\nvalue = { law = "random_angle" }\n'))
-    out.append(("toy_gear_pair", toy + '\n[errors.spacing]\nvalue = { law = "sinusoid", amplitude_um = 3, phase_deg = 10 }\n'
-                '[errors.index]\nvalue = { law = "uniform", half_width_arcsec = 20 }\n'))
+    out.append(
+        (
+            "toy_gear_pair",
+            toy + '\n[errors.spacing]\nvalue = { law = "sinusoid", amplitude = { law = "uniform", low_um = 0, high_um = 5 }, '
+            'phase = "uniform", order = 2 }\n[errors.index]\ntolerance_arcsec = 20\nvalue = { law = "random_angle" }\n',
+        )
+    )
+    out.append(
+        (
+            "toy_gear_pair",
+            toy + '\n[errors.spacing]\nvalue = { law = "sinusoid", amplitude_um = 3, phase_deg = 10 }\n'
+            '[errors.index]\nvalue = { law = "uniform", half_width_arcsec = 20 }\n',
+        )
+    )
     return out
 
 
@@ -120,8 +168,11 @@ def probed() -> dict[tuple[str, str], set[str]]:
             current["type"] = raw["drive"]["type"]
             build_study(raw, name)
     # [drive.reference] (cycloid-pin) names its keys after the error sources, like [errors].
-    return {(t, w): {_norm_key(w, k) for k in keys} for (t, w), keys in rec.items()
-            if w not in NAME_TABLES and not w.startswith("[drive.reference")}
+    return {
+        (t, w): {_norm_key(w, k) for k in keys}
+        for (t, w), keys in rec.items()
+        if w not in NAME_TABLES and not w.startswith("[drive.reference")
+    }
 
 
 def test_every_key_a_reader_asks_for_is_documented_and_every_documented_key_is_read(probed):

@@ -59,11 +59,13 @@ class ToyGearPair(gearte.AbstractGridDrive):
 
     @property
     def error_sources(self):
-        return {"pinion": gearte.SourceSpec("pinion", "eccentricity", symbol="φ_1"),
-                "gear": gearte.SourceSpec("gear", "eccentricity", symbol="φ_2"),
-                "backlash": gearte.SourceSpec("backlash", "deviation", shape=(), tolerance=20.0),
-                "spacing": gearte.SourceSpec("spacing", "deviation", shape=(self.z1,), description="pinion tooth spacing errors, µm"),
-                "index": gearte.SourceSpec("index", "deviation", shape=(), unit="rad", description="output index error, rad")}
+        return {
+            "pinion": gearte.SourceSpec("pinion", "eccentricity", symbol="φ_1"),
+            "gear": gearte.SourceSpec("gear", "eccentricity", symbol="φ_2"),
+            "backlash": gearte.SourceSpec("backlash", "deviation", shape=(), tolerance=20.0),
+            "spacing": gearte.SourceSpec("spacing", "deviation", shape=(self.z1,), description="pinion tooth spacing errors, µm"),
+            "index": gearte.SourceSpec("index", "deviation", shape=(), unit="rad", description="output index error, rad"),
+        }
 
     def input_angles(self):
         # One output revolution: the pattern of both eccentricities repeats after i input revolutions.
@@ -74,9 +76,11 @@ class ToyGearPair(gearte.AbstractGridDrive):
         e = self.checked(errors)
         th = self.input_angles()
         i = self.z2 / self.z1
-        te = (e["pinion"].magnitude[0] * jnp.sin(th + e["pinion"].phase[0])
-              + e["gear"].magnitude[0] * jnp.sin(th / i + e["gear"].phase[0])
-              + jnp.mean(e["spacing"]) * jnp.sin(self.z1 * th)) * 1e-3 / self.base_radius + e["index"]
+        te = (
+            e["pinion"].magnitude[0] * jnp.sin(th + e["pinion"].phase[0])
+            + e["gear"].magnitude[0] * jnp.sin(th / i + e["gear"].phase[0])
+            + jnp.mean(e["spacing"]) * jnp.sin(self.z1 * th)
+        ) * 1e-3 / self.base_radius + e["index"]
         return {"te": te, "backlash": e["backlash"] * 1e-3 / self.base_radius}
 
     @property
@@ -89,13 +93,24 @@ class ToyGearPair(gearte.AbstractGridDrive):
     def trace(self, errors) -> Trace:
         te = np.asarray(self.response(errors)["te"])
         th = np.asarray(self.input_angles())
-        return Trace(theta=th, te=te, span_revs=str(self.z2 // math.gcd(self.z1, self.z2)), max=float(te.max()),
-                     min=float(te.min()), theta_max=float(th[te.argmax()]), theta_min=float(th[te.argmin()]))
+        return Trace(
+            theta=th,
+            te=te,
+            span_revs=str(self.z2 // math.gcd(self.z1, self.z2)),
+            max=float(te.max()),
+            min=float(te.min()),
+            theta_max=float(th[te.argmax()]),
+            theta_min=float(th[te.argmin()]),
+        )
 
     @classmethod
     def from_table(cls, table: Table) -> ToyGearPair:
-        return cls(table.integer("z1", minimum=3), table.integer("z2", minimum=3), base_radius=table.number("base_radius_mm", positive=True),
-                   points=table.integer("points_per_rev", 720, minimum=16))
+        return cls(
+            table.integer("z1", minimum=3),
+            table.integer("z2", minimum=3),
+            base_radius=table.number("base_radius_mm", positive=True),
+            points=table.integer("points_per_rev", 720, minimum=16),
+        )
 
 
 STUDY = """

@@ -53,18 +53,21 @@ class Allocation(AbstractStudyKind):
     def check_absent(self, study: Study) -> None:
         optimised = _optimised(study)
         if optimised:
-            raise ConfigError(f"[allocation]: phases of {sorted(optimised)} are to be optimised; add an [allocation] table "
-                              "(objective = \"worst_case\" | \"expected\" | \"robust\")")
+            raise ConfigError(
+                f"[allocation]: phases of {sorted(optimised)} are to be optimised; add an [allocation] table "
+                '(objective = "worst_case" | "expected" | "robust")'
+            )
 
     def read(self, t: Table, study: Study) -> AllocationSpec:
         optimised = _optimised(study)
         if not isinstance(study.drive, AbstractSinusoidalDrive):
-            raise ConfigError(f"[allocation]: assembly-phase allocation needs a drive with phases (sinusoidal TE); "
-                              f"{study.drive.type_name} has none")
+            raise ConfigError(
+                f"[allocation]: assembly-phase allocation needs a drive with phases (sinusoidal TE); {study.drive.type_name} has none"
+            )
         if not optimised:
-            raise ConfigError("[allocation]: no phase is marked `rule = \"optimise\"` in [errors]; mark the assembly phases to choose")
+            raise ConfigError('[allocation]: no phase is marked `rule = "optimise"` in [errors]; mark the assembly phases to choose')
         if not isinstance(study.metric, Peak):
-            raise ConfigError("[allocation]: assembly rules are optimised for the peak metric; set [study] metric = \"peak\"")
+            raise ConfigError('[allocation]: assembly rules are optimised for the peak metric; set [study] metric = "peak"')
         datums = {r.to for r in optimised.values() if r.to is not None}
         if len(datums) > 1:
             raise ConfigError(f"[errors]: optimised phases must share one datum, got relative_to {sorted(datums)}")
@@ -77,7 +80,7 @@ class Allocation(AbstractStudyKind):
                 raise ConfigError(f"[allocation] datum: {d!r} differs from the optimised phases' relative_to {datum!r}")
             datum = d
         if datum is None:
-            raise ConfigError("[allocation] datum: name the error source whose phase is the assembly datum (e.g. \"ring_manufacturing\")")
+            raise ConfigError('[allocation] datum: name the error source whose phase is the assembly datum (e.g. "ring_manufacturing")')
         sources = study.errors.sources
         if datum not in sources or not isinstance(sources[datum].phase, UniformPhase):
             raise ConfigError(f"[allocation] datum: {datum!r} must be an error source with a uniform (unknown) phase")
@@ -101,16 +104,27 @@ class Allocation(AbstractStudyKind):
 
     def check_together(self, study: Study) -> None:
         if "allocation" in study.kinds and "budget" in study.kinds:
-            raise ConfigError("[budget]: give the assembly rule as concrete phases (rule = \"relative\" or \"fixed\") in a budget "
-                              "study; optimise the rule in its own study first")
+            raise ConfigError(
+                '[budget]: give the assembly rule as concrete phases (rule = "relative" or "fixed") in a budget '
+                "study; optimise the rule in its own study first"
+            )
 
     def run(self, study: Study, spec: AllocationSpec, *, progress: bool | None) -> KindOutcome:
         key = kind_key(study.seed)
         k_opt, k_seed = jax.random.split(key)
-        p = rule_problem(study.drive, study.errors, adjust=spec.adjust, datum=spec.datum,  # pyright: ignore[reportArgumentType]
-                         tolerances=study.tolerances)  # pyright: ignore[reportArgumentType]
-        res = allocate_rule(p, objective=spec.objective, key=k_opt, starts=spec.starts, n_samples=spec.surrogate_samples,
-                            n_check=spec.check_samples, throw=False)
+        drive = study.drive
+        assert isinstance(drive, AbstractSinusoidalDrive)  # checked when the table was read
+        tolerances = {n: float(t) for n, t in study.tolerances.items() if t is not None}  # all given (checked)
+        p = rule_problem(drive, study.errors, adjust=spec.adjust, datum=spec.datum, tolerances=tolerances)
+        res = allocate_rule(
+            p,
+            objective=spec.objective,
+            key=k_opt,
+            starts=spec.starts,
+            n_samples=spec.surrogate_samples,
+            n_check=spec.check_samples,
+            throw=False,
+        )
         found = {n: float(v) for n, v in res.offsets.items()}
         sym = {n: s.symbol for n, s in study.drive.error_sources.items()}
         to_unit = lambda x: float(angle_from_rad(float(x), study.unit))
@@ -119,7 +133,7 @@ class Allocation(AbstractStudyKind):
             "objective": spec.objective,
             "datum": spec.datum,
             "convention": f"phases in rad with the datum phase {sym.get(spec.datum, spec.datum)} = 0 "
-                          + "(relative rules: phase = datum + value; absolute rules: phase = value)",
+            + "(relative rules: phase = datum + value; absolute rules: phase = value)",
             "phases_rad": {sym.get(n, n): v for n, v in found.items()},
             "rules": dict(spec.adjust),
             f"te_worst_case_{u}": to_unit(res.worst_case),
@@ -144,8 +158,9 @@ class Allocation(AbstractStudyKind):
         series["random assembly"] = (study, ErrorModel(random_sources, study.errors.specs))
         values = {}
         for label, (_, model) in series.items():
-            r = monte_carlo(_te_study(study, model), key=study.seed, n_samples=study.samples, chunk_size=study.chunk_size,
-                            progress=progress, desc=label)
+            r = monte_carlo(
+                _te_study(study, model), key=study.seed, n_samples=study.samples, chunk_size=study.chunk_size, progress=progress, desc=label
+            )
             values[label] = angle_from_rad(r.values, u)
         entry["monte_carlo_means"] = {label: float(np.mean(v)) for label, v in values.items()}
 
@@ -153,16 +168,31 @@ class Allocation(AbstractStudyKind):
             mean = float(np.mean(f.values))
             entry[f"te_monte_carlo_mean_{u}"] = mean
             entry["monte_carlo_means"]["found rule"] = mean
-            summary["study"]["source_rules"] = {n: s.phase.describe() for n, s in study.errors.sources.items()
-                                                if s.phase is not None}
-            figures = [Figure("allocation_histograms.png", "overlay_histograms",
-                              {"series": [*values.items(), ("found rule", f.values)], "unit": u, "metric": study.metric.label})]
+            summary["study"]["source_rules"] = {n: s.phase.describe() for n, s in study.errors.sources.items() if s.phase is not None}
+            figures = [
+                Figure(
+                    "allocation_histograms.png",
+                    "overlay_histograms",
+                    {"series": [*values.items(), ("found rule", f.values)], "unit": u, "metric": study.metric.label},
+                )
+            ]
             if seed_study is not None:
                 theta, te_found = f.trace(resolved, f.typical)
                 _, te_seed = f.trace(seed_study, f.typical)
-                figures.append(Figure("allocation_traces.png", "trace_pair", {
-                    "theta_rev": theta, "te_a": te_seed, "te_b": te_found, "unit": u, "labels": ("seed rule", "found rule"),
-                    "title": f"Sample #{f.typical}: the same parts assembled by Wang et al.'s rule and by the found rule"}))
+                figures.append(
+                    Figure(
+                        "allocation_traces.png",
+                        "trace_pair",
+                        {
+                            "theta_rev": theta,
+                            "te_a": te_seed,
+                            "te_b": te_found,
+                            "unit": u,
+                            "labels": ("seed rule", "found rule"),
+                            "title": f"Sample #{f.typical}: the same parts assembled by Wang et al.'s rule and by the found rule",
+                        },
+                    )
+                )
             return figures
 
         return KindOutcome(study=resolved, key="allocation", summary=entry, report=lambda s: _report(study, s), finish=finish)
@@ -187,27 +217,45 @@ def _report(study: Study, s: dict) -> list[str]:
     a = s["allocation"]
     sym = UNIT_SYMBOLS[study.unit]
     u = study.unit
-    lines = ["## Assembly-phase allocation", "",
-             f"The phases marked `optimise` were chosen to minimise the **{a['objective'].replace('_', ' ')}** TE over the unknown "
-             f"manufacturing phases ({a['starts']} BFGS starts on a smooth surrogate, {a['starts_converged']} converged; "
-             f"solver result: {a['result']}; every figure below is the exact metric). Worst case: magnitudes at the tolerances, "
-             "every unknown phase at its worst (exact: each unknown phase turns its own single-frequency group). Expected: "
-             "magnitudes at the tolerances, unknown phases uniform. Robust: magnitudes drawn by their laws too. Expected and "
-             f"robust by Monte Carlo, {a['check_samples']:,} samples.",
-             "", f"{a['convention']}.", "",
-             f"| rule | phases (rad) | worst case ({sym}) | expected ({sym}) | robust ({sym}) |", "|---|---|---|---|---|",
-             "| found | " + ", ".join(f"{k} = {v:.4f}" for k, v in a["phases_rad"].items())
-             + f" | {a[f'te_worst_case_{u}']:.2f} | {a[f'te_expected_{u}']:.2f} | {a[f'te_robust_{u}']:.2f} |"]
+    lines = [
+        "## Assembly-phase allocation",
+        "",
+        f"The phases marked `optimise` were chosen to minimise the **{a['objective'].replace('_', ' ')}** TE over the unknown "
+        f"manufacturing phases ({a['starts']} BFGS starts on a smooth surrogate, {a['starts_converged']} converged; "
+        f"solver result: {a['result']}; every figure below is the exact metric). Worst case: magnitudes at the tolerances, "
+        "every unknown phase at its worst (exact: each unknown phase turns its own single-frequency group). Expected: "
+        "magnitudes at the tolerances, unknown phases uniform. Robust: magnitudes drawn by their laws too. Expected and "
+        f"robust by Monte Carlo, {a['check_samples']:,} samples.",
+        "",
+        f"{a['convention']}.",
+        "",
+        f"| rule | phases (rad) | worst case ({sym}) | expected ({sym}) | robust ({sym}) |",
+        "|---|---|---|---|---|",
+        "| found | "
+        + ", ".join(f"{k} = {v:.4f}" for k, v in a["phases_rad"].items())
+        + f" | {a[f'te_worst_case_{u}']:.2f} | {a[f'te_expected_{u}']:.2f} | {a[f'te_robust_{u}']:.2f} |",
+    ]
     if "seed_rule_phases_rad" in a:
-        lines.append("| given (`seed_rule`) | " + ", ".join(f"{k} = {v:.4f}" for k, v in a["seed_rule_phases_rad"].items())
-                     + f" | {a[f'seed_rule_te_worst_case_{u}']:.2f} | {a[f'seed_rule_te_expected_{u}']:.2f} | {a[f'seed_rule_te_robust_{u}']:.2f} |")
-    lines += ["", "Mean TE of this study's Monte Carlo (same seed, same parts) under each assembly:", "",
-              "| assembly | mean (" + sym + ") |", "|---|---|"]
+        lines.append(
+            "| given (`seed_rule`) | "
+            + ", ".join(f"{k} = {v:.4f}" for k, v in a["seed_rule_phases_rad"].items())
+            + f" | {a[f'seed_rule_te_worst_case_{u}']:.2f} | {a[f'seed_rule_te_expected_{u}']:.2f} | {a[f'seed_rule_te_robust_{u}']:.2f} |"
+        )
+    lines += [
+        "",
+        "Mean TE of this study's Monte Carlo (same seed, same parts) under each assembly:",
+        "",
+        "| assembly | mean (" + sym + ") |",
+        "|---|---|",
+    ]
     lines += [f"| {k} | {v:.2f} |" for k, v in a["monte_carlo_means"].items()]
     lines += ["", "![TE distributions under each assembly](allocation_histograms.png)", ""]
     if "seed_rule_phases_rad" in a:
         lines += ["![one set of parts under both rules](allocation_traces.png)", ""]
-    lines += ["Same-frequency components add as phasors; Wang et al. (2013) compensate them collinearly (λ = ±1), which "
-              "leaves |Σ λ_i A_i|. When the amplitudes satisfy the polygon inequality their phasors can close, and the "
-              "optimiser, which works on the true objective, finds that.", ""]
+    lines += [
+        "Same-frequency components add as phasors; Wang et al. (2013) compensate them collinearly (λ = ±1), which "
+        "leaves |Σ λ_i A_i|. When the amplitudes satisfy the polygon inequality their phasors can close, and the "
+        "optimiser, which works on the true objective, finds that.",
+        "",
+    ]
     return lines

@@ -76,9 +76,14 @@ def _cost_model(t: Table, nominal: float):
         if kind == "grade_table":
             raw = t.table("costs_by_grade")
             costs = {int(k): raw.number(k, minimum=0) for k in list(raw.data)}
-            return GradeTable(costs, quantity=t.string("quantity"), standard=t.string("standard"), module=t.number("module_mm", positive=True),
-                              diameter=t.number("diameter_mm", positive=True),
-                              face_width=t.number("face_width_mm", None, positive=True) if t.has("face_width_mm") else None)
+            return GradeTable(
+                costs,
+                quantity=t.string("quantity"),
+                standard=t.string("standard"),
+                module=t.number("module_mm", positive=True),
+                diameter=t.number("diameter_mm", positive=True),
+                face_width=t.number("face_width_mm", None, positive=True) if t.has("face_width_mm") else None,
+            )
         cls = {"reciprocal": Reciprocal, "reciprocal_square": ReciprocalSquare, "exponential": Exponential, "power": Power}[kind]
         params = {"reciprocal": ("a", "b"), "reciprocal_square": ("a", "b"), "exponential": ("a", "b", "k"), "power": ("a", "k")}[kind]
         if not any(t.has(k) for k in params):
@@ -122,8 +127,10 @@ class Budget(AbstractStudyKind):
             names = list(specs)
         missing = sorted(n for n in names if not study.tolerances.get(n))
         if missing:
-            raise ConfigError(f"[budget]: every budgeted error source needs a nominal tolerance > 0 (`tolerance_um` in "
-                              f"[errors.NAME]); missing or zero in {missing}")
+            raise ConfigError(
+                f"[budget]: every budgeted error source needs a nominal tolerance > 0 (`tolerance_um` in "
+                f"[errors.NAME]); missing or zero in {missing}"
+            )
         if t.has("constraints"):
             if t.has("spec"):
                 raise ConfigError("[budget]: give `spec` (one constraint on the study's metric) or [[budget.constraints]], not both")
@@ -163,21 +170,30 @@ class Budget(AbstractStudyKind):
                 if n not in names:
                     raise ConfigError(f"[budget.grades]: {n!r} is not a budgeted error source; use one of {names}")
                 g = gt.table(n)
-                grades[n] = {"quantity": g.string("quantity", "F_r", choices=("f_pt", "F_p", "F_alpha", "F_beta", "F_r")),
-                             "factor": g.number("factor", 2.0, positive=True),
-                             "standard": g.string("standard", "1328-1:2013", choices=("1328-1:2013", "1328-1:1995")),
-                             "module": g.number("module_mm", positive=True), "diameter": g.number("diameter_mm", positive=True),
-                             "face_width": g.number("face_width_mm", positive=True) if g.has("face_width_mm") else None}
+                grades[n] = {
+                    "quantity": g.string("quantity", "F_r", choices=("f_pt", "F_p", "F_alpha", "F_beta", "F_r")),
+                    "factor": g.number("factor", 2.0, positive=True),
+                    "standard": g.string("standard", "1328-1:2013", choices=("1328-1:2013", "1328-1:1995")),
+                    "module": g.number("module_mm", positive=True),
+                    "diameter": g.number("diameter_mm", positive=True),
+                    "face_width": g.number("face_width_mm", positive=True) if g.has("face_width_mm") else None,
+                }
                 g.finish()
             gt.finish()
         pareto = t.get("pareto_specs", [])
         if not isinstance(pareto, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0 for x in pareto):
             raise ConfigError("[budget] pareto_specs: expected a list of positive numbers (specs of the first constraint)")
-        return BudgetSpec(constraints=tuple(constraints), samples=t.integer("samples", 4096, minimum=64),
-                          check_samples=t.integer("check_samples", 50_000, minimum=1000), costs=costs, nominal=nominal,
-                          maximum={n: factor * nominal[n] for n in names}, grades=grades,
-                          pareto_specs=tuple(float(x) for x in pareto),
-                          compare_random_assembly=t.boolean("compare_random_assembly", True))
+        return BudgetSpec(
+            constraints=tuple(constraints),
+            samples=t.integer("samples", 4096, minimum=64),
+            check_samples=t.integer("check_samples", 50_000, minimum=1000),
+            costs=costs,
+            nominal=nominal,
+            maximum={n: factor * nominal[n] for n in names},
+            grades=grades,
+            pareto_specs=tuple(float(x) for x in pareto),
+            compare_random_assembly=t.boolean("compare_random_assembly", True),
+        )
 
     def run(self, study: Study, spec: BudgetSpec, *, progress: bool | None) -> KindOutcome:
         b = spec
@@ -205,8 +221,16 @@ class Budget(AbstractStudyKind):
             "target_yield" if c0.constraint == "yield" else "k": c0.target,
         }
         if len(b.constraints) > 1 or c0.metric.name != study.metric.name:
-            entry["constraints"] = [{"metric": c.metric.name, "spec": c.spec, "spec_unit": u if c.metric.quantity == "angle" else "pairs",
-                                     "constraint": c.constraint, "target": c.target} for c in b.constraints]
+            entry["constraints"] = [
+                {
+                    "metric": c.metric.name,
+                    "spec": c.spec,
+                    "spec_unit": u if c.metric.quantity == "angle" else "pairs",
+                    "constraint": c.constraint,
+                    "target": c.target,
+                }
+                for c in b.constraints
+            ]
             entry["verified_yields"] = list(best.verified_yields)
         entry |= {
             "tolerances_um": best.tolerances,
@@ -228,18 +252,33 @@ class Budget(AbstractStudyKind):
             "optimisation_samples": b.samples,
             "assembly": {n: s.phase.describe() for n, s in study.errors.sources.items() if s.phase is not None},
         }
-        figures = [Figure("contributions.png", "contributions", {
-            "values": entry[f"contributions_{u}"], "unit": u,
-            "title": "Share of the constrained statistic by source (∂stat/∂T_i · T_i)"})]
+        figures = [
+            Figure(
+                "contributions.png",
+                "contributions",
+                {
+                    "values": entry[f"contributions_{u}"],
+                    "unit": u,
+                    "title": "Share of the constrained statistic by source (∂stat/∂T_i · T_i)",
+                },
+            )
+        ]
         has_rule = any(isinstance(s.phase, (RelativePhase, FixedPhase)) for s in study.errors.sources.values())
         if b.compare_random_assembly and has_rule:
-            rand_model = ErrorModel({n: ErrorSource(s.magnitude, UniformPhase() if s.phase is not None else None)
-                                     for n, s in study.errors.sources.items()}, study.errors.specs)
+            rand_model = ErrorModel(
+                {n: ErrorSource(s.magnitude, UniformPhase() if s.phase is not None else None) for n, s in study.errors.sources.items()},
+                study.errors.specs,
+            )
             pr = problem(rand_model)
             rb = optimise_budget(pr, key=k_rand, n_samples=b.samples, n_check=b.check_samples, throw=False)
             rbase = uniform_scaling(pr, key=k_rand, n_check=b.check_samples)
-            entry["random_assembly"] = {"tolerances_um": rb.tolerances, "cost": rb.cost, "baseline_cost": rbase.cost,
-                                        "verified_yield": rb.verified_yield, "baseline_verified_yield": rbase.verified_yield}
+            entry["random_assembly"] = {
+                "tolerances_um": rb.tolerances,
+                "cost": rb.cost,
+                "baseline_cost": rbase.cost,
+                "verified_yield": rb.verified_yield,
+                "baseline_verified_yield": rbase.verified_yield,
+            }
         if b.pareto_specs:
             n_front = max(1000, b.check_samples // 2)
             to_int = [c0.to_internal(u, x).spec for x in b.pareto_specs]
@@ -247,12 +286,20 @@ class Budget(AbstractStudyKind):
             rows = []
             for s, r in zip(b.pareto_specs, front):
                 q = problem(study.errors, s)
-                rows.append({f"spec_{u}": s, "cost": r.cost, "baseline_cost": uniform_scaling(q, key=k_front, n_check=n_front).cost,
-                             "verified_yield": r.verified_yield, "tolerances_um": r.tolerances})
+                rows.append(
+                    {
+                        f"spec_{u}": s,
+                        "cost": r.cost,
+                        "baseline_cost": uniform_scaling(q, key=k_front, n_check=n_front).cost,
+                        "verified_yield": r.verified_yield,
+                        "tolerances_um": r.tolerances,
+                    }
+                )
             entry["pareto"] = rows
             figures.append(Figure("pareto.png", "pareto", {"rows": rows, "unit": u}))
-        return KindOutcome(study=_scaled_study(study, b, best.tolerances), key="budget", summary=entry, figures=figures,
-                           report=lambda s: _report(study, s))
+        return KindOutcome(
+            study=_scaled_study(study, b, best.tolerances), key="budget", summary=entry, figures=figures, report=lambda s: _report(study, s)
+        )
 
 
 def _scaled_study(study: Study, b: BudgetSpec, tolerances: dict[str, float]) -> Study:
@@ -269,8 +316,14 @@ def _scaled_study(study: Study, b: BudgetSpec, tolerances: dict[str, float]) -> 
 
 def _grade(spec: dict, tol_um: float):
     try:
-        return nearest_grade(spec["factor"] * tol_um, quantity=spec["quantity"], standard=spec["standard"], module=spec["module"],
-                             diameter=spec["diameter"], face_width=spec["face_width"])
+        return nearest_grade(
+            spec["factor"] * tol_um,
+            quantity=spec["quantity"],
+            standard=spec["standard"],
+            module=spec["module"],
+            diameter=spec["diameter"],
+            face_width=spec["face_width"],
+        )
     except ValueError as e:
         return f"none ({e})"
 
@@ -280,30 +333,50 @@ def _report(study: Study, s: dict) -> list[str]:
     u = study.unit
     sym = UNIT_SYMBOLS[u]
     metric = study.metric.label
-    cons = (f"yield P({metric} ≤ {b[f'spec_{u}']:g}{sym}) ≥ {b['target_yield']}" if b["constraint"] == "yield"
-            else f"mean + {b['k']}σ ≤ {b[f'spec_{u}']:g}{sym}")
+    cons = (
+        f"yield P({metric} ≤ {b[f'spec_{u}']:g}{sym}) ≥ {b['target_yield']}"
+        if b["constraint"] == "yield"
+        else f"mean + {b['k']}σ ≤ {b[f'spec_{u}']:g}{sym}"
+    )
     if "constraints" in b:
-        cons = "; ".join(f"{c['constraint'].replace('_', ' ')} of {c['metric']} against {c['spec']:g} {c['spec_unit']}"
-                         f" (target {c['target']:g})" for c in b["constraints"])
-    lines = ["## Tolerance budget", "",
-             f"Cheapest tolerances with {cons}. Each budgeted value is its law's centre + tolerance × a standard draw "
-             f"(common random numbers, {b['optimisation_samples']:,} samples, smoothed quantile); the budget is then scaled on a fresh "
-             f"sample to clear the target by four binomial standard errors and verified on another fresh sample of "
-             f"{b['verified_samples']:,}. Every source's tolerance is capped at its maximum (`maximum_factor` × nominal). "
-             f"Solver converged: {b['solver_converged']} ({b['solver_result']}).", "",
-             f"| source | nominal | optimised | uniform scaling | ISO grade | cost model | share of the statistic ({sym}) |",
-             "|---|---|---|---|---|---|---|"]
+        cons = "; ".join(
+            f"{c['constraint'].replace('_', ' ')} of {c['metric']} against {c['spec']:g} {c['spec_unit']} (target {c['target']:g})"
+            for c in b["constraints"]
+        )
+    lines = [
+        "## Tolerance budget",
+        "",
+        f"Cheapest tolerances with {cons}. Each budgeted value is its law's centre + tolerance × a standard draw "
+        f"(common random numbers, {b['optimisation_samples']:,} samples, smoothed quantile); the budget is then scaled on a fresh "
+        f"sample to clear the target by four binomial standard errors and verified on another fresh sample of "
+        f"{b['verified_samples']:,}. Every source's tolerance is capped at its maximum (`maximum_factor` × nominal). "
+        f"Solver converged: {b['solver_converged']} ({b['solver_result']}).",
+        "",
+        f"| source | nominal | optimised | uniform scaling | ISO grade | cost model | share of the statistic ({sym}) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for n, t in b["tolerances_um"].items():
-        lines.append(f"| {n} | {b['nominal_tolerances_um'][n]:g} | {t:.2f} | {b['baseline_tolerances_um'][n]:.2f} | {b['grades'].get(n, '—')} | "
-                     f"{b['cost_models'][n]} | {b[f'contributions_{u}'][n]:.2f} |")
-    lines += ["", "Tolerances in µm (rad for angular sources).", "",
-              f"Cost {b['cost']:.4f} against {b['baseline_cost']:.4f} for the cheapest uniform scaling of the nominal tolerances "
-              f"(× {b['baseline_scale']:.3f}); verified yield {b['verified_yield']:.5f} (baseline {b['baseline_verified_yield']:.5f}).", ""]
+        lines.append(
+            f"| {n} | {b['nominal_tolerances_um'][n]:g} | {t:.2f} | {b['baseline_tolerances_um'][n]:.2f} | {b['grades'].get(n, '—')} | "
+            f"{b['cost_models'][n]} | {b[f'contributions_{u}'][n]:.2f} |"
+        )
+    lines += [
+        "",
+        "Tolerances in µm (rad for angular sources).",
+        "",
+        f"Cost {b['cost']:.4f} against {b['baseline_cost']:.4f} for the cheapest uniform scaling of the nominal tolerances "
+        f"(× {b['baseline_scale']:.3f}); verified yield {b['verified_yield']:.5f} (baseline {b['baseline_verified_yield']:.5f}).",
+        "",
+    ]
     if "random_assembly" in b:
         r = b["random_assembly"]
-        lines += [f"Without the assembly rule (every phase random) the same spec costs {r['cost']:.4f} optimised, {r['baseline_cost']:.4f} "
-                  f"by uniform scaling: the rule changes which tolerances matter.", "",
-                  "| source | with the rule (µm) | random assembly (µm) |", "|---|---|---|"]
+        lines += [
+            f"Without the assembly rule (every phase random) the same spec costs {r['cost']:.4f} optimised, {r['baseline_cost']:.4f} "
+            f"by uniform scaling: the rule changes which tolerances matter.",
+            "",
+            "| source | with the rule (µm) | random assembly (µm) |",
+            "|---|---|---|",
+        ]
         lines += [f"| {n} | {b['tolerances_um'][n]:.2f} | {r['tolerances_um'][n]:.2f} |" for n in b["tolerances_um"]]
         lines.append("")
     lines += ["![contributions](contributions.png)", ""]

@@ -38,22 +38,47 @@ def compare_runs(run_dirs: list[str | Path], out: str | Path) -> dict:
     rows = []
     for d, summ, _ in runs:
         te = summ["te"]
-        rows.append({"run": str(d), "name": summ["study"]["name"], "title": summ["study"]["title"], "n": te["n"], "min": te["min"],
-                     "max": te["max"], "mean": te["mean"], "std": te["std"], "p99.73": te["percentiles"]["99.73"],
-                     "mean_vs_first": te["mean"] / base if base else float("nan")})
+        rows.append(
+            {
+                "run": str(d),
+                "name": summ["study"]["name"],
+                "title": summ["study"]["title"],
+                "n": te["n"],
+                "min": te["min"],
+                "max": te["max"],
+                "mean": te["mean"],
+                "std": te["std"],
+                "p99.73": te["percentiles"]["99.73"],
+                "mean_vs_first": te["mean"] / base if base else float("nan"),
+            }
+        )
     result = {"unit": unit, "metric": metric, "runs": rows}
     with atomic_output_dir(out) as tmp:
         series = [(r["title"], v) for r, (_, _, v) in zip(rows, runs)]
         plots.overlay_histograms(series, unit=unit, metric=metric, path=tmp / "overlay.png")
         plots.grid_of_histograms(series, unit=unit, metric=metric, path=tmp / "histograms.png")
-        lines = ["# Comparison of TE studies", "", f"Metric: {metric}; unit {unit} ({sym}).", "",
-                 "| study | n | min | max | mean | std | P99.73 | mean / first |", "|---|---|---|---|---|---|---|---|"]
+        lines = [
+            "# Comparison of TE studies",
+            "",
+            f"Metric: {metric}; unit {unit} ({sym}).",
+            "",
+            "| study | n | min | max | mean | std | P99.73 | mean / first |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
         for r in rows:
-            lines.append(f"| {r['title']} (`{r['run']}`) | {r['n']:,} | {_fmt(r['min'])} | {_fmt(r['max'])} | {_fmt(r['mean'])} | "
-                         f"{_fmt(r['std'])} | {_fmt(r['p99.73'])} | {r['mean_vs_first']:.3f} |")
-        lines += ["", "![overlaid histograms](overlay.png)", "", "![histograms side by side](histograms.png)", "",
-                  "Each study's own report (assumptions, drive, error laws) is `report.md` in its folder.", ""]
+            lines.append(
+                f"| {r['title']} (`{r['run']}`) | {r['n']:,} | {_fmt(r['min'])} | {_fmt(r['max'])} | {_fmt(r['mean'])} | "
+                f"{_fmt(r['std'])} | {_fmt(r['p99.73'])} | {r['mean_vs_first']:.3f} |"
+            )
+        lines += [
+            "",
+            "![overlaid histograms](overlay.png)",
+            "",
+            "![histograms side by side](histograms.png)",
+            "",
+            "Each study's own report (assumptions, drive, error laws) is `report.md` in its folder.",
+            "",
+        ]
         (tmp / "report.md").write_text("\n".join(lines), encoding="utf-8")
         write_json(tmp / "comparison.json", result)
     return result
-

@@ -129,8 +129,15 @@ def study_header(st: Table, *, samples: int | None, seed: int | None) -> dict:
         if not 0 <= seed < 2**63:
             raise ConfigError(f"--seed: must be in [0, 2⁶³), got {seed}")
         s = seed
-    return {"name": name, "title": st.string("title", name), "description": st.string("description", ""), "samples": n, "seed": s,
-            "chunk_size": st.integer("chunk_size", None, minimum=1) if st.has("chunk_size") else None, "notes": tuple(notes)}
+    return {
+        "name": name,
+        "title": st.string("title", name),
+        "description": st.string("description", ""),
+        "samples": n,
+        "seed": s,
+        "chunk_size": st.integer("chunk_size", None, minimum=1) if st.has("chunk_size") else None,
+        "notes": tuple(notes),
+    }
 
 
 def load_study(path: str | Path, *, samples: int | None = None, seed: int | None = None) -> Study:
@@ -160,9 +167,21 @@ def build_study(raw: dict, source: str, *, samples: int | None = None, seed: int
     st.finish()
 
     model, tolerances = read_errors(top, drive)
-    study = Study(name=h["name"], title=h["title"], description=h["description"], samples=h["samples"], seed=h["seed"], unit=unit,
-                  chunk_size=h["chunk_size"], notes=h["notes"], source_path=source, drive=drive, errors=model,
-                  tolerances=tolerances, metric=metric)
+    study = Study(
+        name=h["name"],
+        title=h["title"],
+        description=h["description"],
+        samples=h["samples"],
+        seed=h["seed"],
+        unit=unit,
+        chunk_size=h["chunk_size"],
+        notes=h["notes"],
+        source_path=source,
+        drive=drive,
+        errors=model,
+        tolerances=tolerances,
+        metric=metric,
+    )
     kinds = {}
     for k in STUDY_KINDS:
         if top.has(k.table):
@@ -189,12 +208,17 @@ def read_errors(top: Table, drive: AbstractDrive) -> tuple[ErrorModel, dict[str,
     for k in et.data:
         if k not in specs:
             hint = difflib.get_close_matches(k, list(specs), n=1)
-            raise ConfigError(f"[errors]: unknown error source `{k}`" + (f" (did you mean `{hint[0]}`?)" if hint else "")
-                              + f"; this drive has {list(specs)}")
+            raise ConfigError(
+                f"[errors]: unknown error source `{k}`"
+                + (f" (did you mean `{hint[0]}`?)" if hint else "")
+                + f"; this drive has {list(specs)}"
+            )
     missing = [k for k, s in specs.items() if s.kind == "eccentricity" and not et.has(k)]
     if missing:
-        raise ConfigError(f"[errors]: missing error source(s) {missing}; give each a table [errors.NAME] with `magnitude` and "
-                          "`phase` (magnitude law 'fixed' with value_um = 0 leaves one out)")
+        raise ConfigError(
+            f"[errors]: missing error source(s) {missing}; give each a table [errors.NAME] with `magnitude` and "
+            "`phase` (magnitude law 'fixed' with value_um = 0 leaves one out)"
+        )
     symbols = {s.symbol: n for n, s in specs.items()}
     sources, tolerances = {}, {}
     for name, spec in specs.items():
@@ -238,8 +262,10 @@ def _tolerance(t: Table, spec: SourceSpec) -> float | None:
         return declared
     if declared is not None and tol != declared:
         u = "µm" if spec.unit == "µm" else "rad"
-        raise ConfigError(f"{t.where} tolerance: {tol:g} {u}, but the drive declares {declared:g} {u} for this source; give it in "
-                          "one place (or make them agree)")
+        raise ConfigError(
+            f"{t.where} tolerance: {tol:g} {u}, but the drive declares {declared:g} {u} for this source; give it in "
+            "one place (or make them agree)"
+        )
     return tol
 
 
@@ -259,8 +285,9 @@ def _angle_value(t: Table, stem: str, default: Any = None, *, minimum: float | N
     return x
 
 
-def _length_or_angle(t: Table, stem: str, spec: SourceSpec, default: Any = ..., *, minimum: float | None = None,
-                     positive: bool = False) -> Any:
+def _length_or_angle(
+    t: Table, stem: str, spec: SourceSpec, default: Any = ..., *, minimum: float | None = None, positive: bool = False
+) -> Any:
     """A value of the source's unit: `stem_um` for µm sources, an angle suffix for rad sources."""
     if spec.unit == "µm":
         for u in ANGLE_SUFFIXES:
@@ -304,8 +331,12 @@ def _magnitude(t: Table, tol: float | None) -> AbstractLaw:
     if law == "normal":
         return Normal(t.number("mean_um"), t.number("std_um", minimum=0))
     if law == "truncated_normal":
-        return TruncatedNormal(t.number("mean_um"), t.number("std_um", positive=True), t.number("low_um", 0.0, minimum=0),
-                               t.number("high_um", tol if tol is not None else math.inf, minimum=0))
+        return TruncatedNormal(
+            t.number("mean_um"),
+            t.number("std_um", positive=True),
+            t.number("low_um", 0.0, minimum=0),
+            t.number("high_um", tol if tol is not None else math.inf, minimum=0),
+        )
     # Rayleigh: scale from the tolerance (user's choice, stated in the report).
     if t.has("scale_um") and t.has("scale_fraction"):
         raise ConfigError(f"{t.where}: give `scale_um` or `scale_fraction` (× tolerance), not both")
@@ -363,7 +394,7 @@ def _value(t: Table, spec: SourceSpec, tol: float | None, *, pattern_ok: bool = 
     else:
         amp = Fixed(v("amplitude"))
     if t.has("phase") and any(t.has(f"phase_{u}") for u in ANGLE_SUFFIXES):
-        raise ConfigError(f"{t.where}: give a fixed `phase_deg` or `phase = \"uniform\"`, not both")
+        raise ConfigError(f'{t.where}: give a fixed `phase_deg` or `phase = "uniform"`, not both')
     if t.has("phase"):
         t.string("phase", choices=("uniform",))
         phase: AbstractPhase = UniformPhase()

@@ -50,8 +50,10 @@ def write_json(path: Path, obj) -> None:
 @contextlib.contextmanager
 def sigterm_as_interrupt():
     """Turn SIGTERM into KeyboardInterrupt so that clean-up runs when a job is killed politely."""
+
     def handler(signum, frame):
         raise KeyboardInterrupt(f"signal {signum}")
+
     try:
         previous = signal.signal(signal.SIGTERM, handler)
     except ValueError:  # not the main thread

@@ -1,9 +1,9 @@
 """The `gearte` command line.
 
-    gearte run CONFIG.toml --out DIR [--samples N] [--seed S] [--chunk-size C] [--progress/--no-progress]
-    gearte compare RUN_DIR [RUN_DIR ...] --out DIR
-    gearte check CONFIG.toml
-    gearte grade --standard {1328-1:2013,1328-1:1995} --module M --diameter D [--face-width B] [--teeth Z] --grade G
+gearte run CONFIG.toml --out DIR [--samples N] [--seed S] [--chunk-size C] [--progress/--no-progress]
+gearte compare RUN_DIR [RUN_DIR ...] --out DIR
+gearte check CONFIG.toml
+gearte grade --standard {1328-1:2013,1328-1:1995} --module M --diameter D [--face-width B] [--teeth Z] --grade G
 """
 
 from __future__ import annotations
@@ -45,7 +45,9 @@ def _seed(text: str) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="gearte", description="Transmission error of gear drives from their manufacturing and assembly errors.")
+    p = argparse.ArgumentParser(
+        prog="gearte", description="Transmission error of gear drives from their manufacturing and assembly errors."
+    )
     p.add_argument("--version", action="version", version=f"gearte {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run a study file and write its results folder")
@@ -61,8 +63,12 @@ def _parser() -> argparse.ArgumentParser:
     k = sub.add_parser("check", help="validate a study file without running it")
     k.add_argument("config")
     g = sub.add_parser("grade", help="ISO 1328 tolerances (µm) of an accuracy grade, as JSON")
-    g.add_argument("--standard", required=True, choices=["1328-1:2013", "1328-1:1995"],
-                   help="ISO 1328-1:2013 (classes 1-11) or ISO 1328-1:1995/-2:1997 = GB/T 10095 (grades 0-12)")
+    g.add_argument(
+        "--standard",
+        required=True,
+        choices=["1328-1:2013", "1328-1:1995"],
+        help="ISO 1328-1:2013 (classes 1-11) or ISO 1328-1:1995/-2:1997 = GB/T 10095 (grades 0-12)",
+    )
     g.add_argument("--module", required=True, type=float, help="normal module m, mm")
     g.add_argument("--diameter", required=True, type=float, help="reference diameter d, mm")
     g.add_argument("--face-width", type=float, help="face width b, mm (needed for F_beta; F_beta is null without it)")
@@ -79,18 +85,33 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with sigterm_as_interrupt():
             if args.command == "grade":
-                tol = iso1328_tolerances(standard=args.standard, module=args.module, diameter=args.diameter,
-                                         face_width=args.face_width, grade=args.grade, teeth=args.teeth)
-                out = {"standard": args.standard, "grade": args.grade, "module_mm": args.module, "diameter_mm": args.diameter,
-                       "face_width_mm": args.face_width, "unit": "um"}
+                tol = iso1328_tolerances(
+                    standard=args.standard,
+                    module=args.module,
+                    diameter=args.diameter,
+                    face_width=args.face_width,
+                    grade=args.grade,
+                    teeth=args.teeth,
+                )
+                out = {
+                    "standard": args.standard,
+                    "grade": args.grade,
+                    "module_mm": args.module,
+                    "diameter_mm": args.diameter,
+                    "face_width_mm": args.face_width,
+                    "unit": "um",
+                }
                 out.update({k: tol.get(k) for k in ("f_pt", "F_p", "F_alpha", "F_beta", "F_r")})
                 print(json.dumps(out, ensure_ascii=False))
                 return 0
             if args.command == "check":
                 study = load_study(args.config)
-                print(f"{args.config}: OK ({study.name}: {type(study.drive).__name__}, {len(study.errors.specs)} error sources, "
-                      f"metric {study.metric.name}, {study.samples:,} samples, seed {study.seed}"
-                      + (f"; {', '.join(f'[{k}]' for k in study.kinds)}" if study.kinds else "") + ")")
+                print(
+                    f"{args.config}: OK ({study.name}: {type(study.drive).__name__}, {len(study.errors.specs)} error sources, "
+                    f"metric {study.metric.name}, {study.samples:,} samples, seed {study.seed}"
+                    + (f"; {', '.join(f'[{k}]' for k in study.kinds)}" if study.kinds else "")
+                    + ")"
+                )
                 return 0
             if args.command == "compare":
                 compare_runs(args.runs, args.out)
@@ -103,8 +124,10 @@ def main(argv: list[str] | None = None) -> int:
             summary = run_study(study, args.out, progress=args.progress, command=command)
             te = summary["te"]
             sym = {"arcsec": "″", "arcmin": "′", "urad": " µrad", "pairs": " pairs"}[te["unit"]]
-            print(f"{study.name}: {te['metric']} over {te['n']:,} samples: mean {te['mean']:.2f}{sym}, std {te['std']:.2f}{sym}, "
-                  f"min {te['min']:.2f}{sym}, max {te['max']:.2f}{sym}, P99.73 {te['percentiles']['99.73']:.2f}{sym}")
+            print(
+                f"{study.name}: {te['metric']} over {te['n']:,} samples: mean {te['mean']:.2f}{sym}, std {te['std']:.2f}{sym}, "
+                f"min {te['min']:.2f}{sym}, max {te['max']:.2f}{sym}, P99.73 {te['percentiles']['99.73']:.2f}{sym}"
+            )
             print(f"report: {args.out}/report.md")
             return 0
     except ConfigError as e:

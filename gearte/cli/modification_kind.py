@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ..core.schema import Table
+from ..drives.cycloid_pin import CycloidPin
 from ..optimise.modification import ModificationSpec, modification_report, modification_summary
 from .kind_base import AbstractStudyKind, KindOutcome
 
@@ -24,8 +25,13 @@ class Modification(AbstractStudyKind):
     def run(self, study: Study, spec: ModificationSpec, *, progress: bool | None) -> KindOutcome:
         del progress
         drive = study.drive
+        assert isinstance(drive, CycloidPin)  # checked when the table was read
         # An infeasible spec is reported (the best start, marked infeasible), not raised.
-        sol = spec.solve(drive, throw=False)  # pyright: ignore[reportArgumentType]
-        entry = modification_summary(drive, spec, sol)  # pyright: ignore[reportArgumentType]
-        return KindOutcome(study=study, key="optimised_modification", summary=entry,
-                           report=lambda s: modification_report(drive, s["optimised_modification"]))  # pyright: ignore[reportArgumentType]
+        sol = spec.solve(drive, throw=False)
+        entry = modification_summary(drive, spec, sol)
+        return KindOutcome(
+            study=study,
+            key="optimised_modification",
+            summary=entry,
+            report=lambda s: modification_report(drive, s["optimised_modification"]),
+        )

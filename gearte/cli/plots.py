@@ -29,10 +29,20 @@ def histogram(values, stats, *, unit: str, metric: str, title: str, path, bins: 
         ax.axvline(stats.percentiles[p], color="#222222", linestyle=style, linewidth=1.0, label=f"P{p} = {stats.percentiles[p]:.1f}{sym}")
     if estimate is not None:
         ax.axvline(estimate, color="#cc3311", linewidth=1.5, label=f"estimate {estimate:.1f}{sym}")
-    text = (f"n = {stats.n:,}\nmin = {stats.min:.1f}{sym}\nmax = {stats.max:.1f}{sym}\n"
-            f"mean = {stats.mean:.1f}{sym}\nstd = {stats.std:.1f}{sym}")
-    ax.text(0.02, 0.97, text, transform=ax.transAxes, va="top", ha="left", family="monospace", fontsize=8,
-            bbox=dict(boxstyle="round", facecolor="white", alpha=0.85, edgecolor="#bbbbbb"))
+    text = (
+        f"n = {stats.n:,}\nmin = {stats.min:.1f}{sym}\nmax = {stats.max:.1f}{sym}\nmean = {stats.mean:.1f}{sym}\nstd = {stats.std:.1f}{sym}"
+    )
+    ax.text(
+        0.02,
+        0.97,
+        text,
+        transform=ax.transAxes,
+        va="top",
+        ha="left",
+        family="monospace",
+        fontsize=8,
+        bbox=dict(boxstyle="round", facecolor="white", alpha=0.85, edgecolor="#bbbbbb"),
+    )
     ax.set_xlabel(f"{_METRIC_LABEL.get(metric, metric)} ({sym})")
     ax.set_ylabel("samples")
     ax.set_title(title, fontsize=10)
@@ -92,9 +102,17 @@ def grid_of_histograms(series, *, unit: str, metric: str, path, bins: int = 60):
     for ax, (label, v) in zip(axes.flat, series):
         ax.hist(v, bins=np.linspace(lo, hi, bins + 1) if hi > lo else bins, color="#4477aa", alpha=0.85)
         ax.set_title(label, fontsize=9)
-        ax.text(0.98, 0.95, f"mean {np.mean(v):.1f}{sym}\nstd {np.std(v, ddof=1) if len(v) > 1 else 0:.1f}{sym}\n"
-                f"min {np.min(v):.1f}{sym}\nmax {np.max(v):.1f}{sym}", transform=ax.transAxes, ha="right", va="top",
-                fontsize=8, family="monospace")
+        ax.text(
+            0.98,
+            0.95,
+            f"mean {np.mean(v):.1f}{sym}\nstd {np.std(v, ddof=1) if len(v) > 1 else 0:.1f}{sym}\n"
+            f"min {np.min(v):.1f}{sym}\nmax {np.max(v):.1f}{sym}",
+            transform=ax.transAxes,
+            ha="right",
+            va="top",
+            fontsize=8,
+            family="monospace",
+        )
         ax.set_xlabel(f"{_METRIC_LABEL.get(metric, metric)} ({sym})")
     for ax in list(axes.flat)[n:]:
         ax.set_visible(False)

@@ -34,8 +34,14 @@ from .kinds import STUDY_KINDS
 
 def versions() -> dict:
     """Versions of gearte and what it runs on, for summaries."""
-    return {"gearte": __version__, "jax": jax.__version__, "equinox": equinox.__version__,
-            "optimistix": optimistix.__version__, "numpy": np.__version__, "python": platform.python_version()}
+    return {
+        "gearte": __version__,
+        "jax": jax.__version__,
+        "equinox": equinox.__version__,
+        "optimistix": optimistix.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+    }
 
 
 def sample_errors(study: Study, index: int) -> dict:
@@ -53,8 +59,7 @@ class RunContext(AbstractStudyContext):
         self.outputs = outputs
 
     def monte_carlo(self, fn, *, desc: str) -> np.ndarray:
-        return monte_carlo(fn, key=self.seed, n_samples=self.samples, chunk_size=self.chunk_size, progress=self.progress,
-                           desc=desc).values
+        return monte_carlo(fn, key=self.seed, n_samples=self.samples, chunk_size=self.chunk_size, progress=self.progress, desc=desc).values
 
     def sample_errors(self, index: int) -> dict:
         return sample_errors(self.study, index)
@@ -100,8 +105,14 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
             outcome = kind.run(study, study.kinds[kind.table], progress=progress)
             outcomes.append(outcome)
             study = outcome.study
-    mc = monte_carlo(_RunSample(TEStudy(study.drive, study.errors, metric=study.metric), study.metric), key=study.seed, n_samples=study.samples,
-                     chunk_size=study.chunk_size, progress=progress, desc=study.name)
+    mc = monte_carlo(
+        _RunSample(TEStudy(study.drive, study.errors, metric=study.metric), study.metric),
+        key=study.seed,
+        n_samples=study.samples,
+        chunk_size=study.chunk_size,
+        progress=progress,
+        desc=study.name,
+    )
     values_rad, outputs = mc.values
     angle = study.metric.quantity == "angle"
     values = angle_from_rad(values_rad, study.unit) if angle else values_rad
@@ -118,19 +129,40 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
 
     summary = {
         "gearte_version": __version__,
-        "study": {"name": study.name, "title": study.title, "description": study.description, "config": study.source_path,
-                  "command": command},
+        "study": {
+            "name": study.name,
+            "title": study.title,
+            "description": study.description,
+            "config": study.source_path,
+            "command": command,
+        },
         "te": stats.to_dict() | {"metric": study.metric.name},
         "samples": study.samples,
         "seed": study.seed,
         "chunk_size": mc.chunk_size,
         "block_size": mc.block_size,
         "drive": {"type": study.drive.type_name} | dict(study.drive.describe()),
-        "errors": {name: {"kind": spec.kind, "tolerance": study.tolerances[name], "unit": spec.unit, "count": spec.count,
-                          "phase_symbol": spec.symbol, "magnitude": src.describe(spec.unit)[0], "phase": src.describe(spec.unit)[1]}
-                   for (name, src), spec in zip(study.errors.sources.items(), study.errors.specs.values())},
-        "typical_sample": {"index": typical, "te": float(values[typical]), "hyper_period_input_revs": tr.span_revs,
-                           "max": mx, "min": mn, "theta_max_rad": tr.theta_max, "theta_min_rad": tr.theta_min},
+        "errors": {
+            name: {
+                "kind": spec.kind,
+                "tolerance": study.tolerances[name],
+                "unit": spec.unit,
+                "count": spec.count,
+                "phase_symbol": spec.symbol,
+                "magnitude": src.describe(spec.unit)[0],
+                "phase": src.describe(spec.unit)[1],
+            }
+            for (name, src), spec in zip(study.errors.sources.items(), study.errors.specs.values())
+        },
+        "typical_sample": {
+            "index": typical,
+            "te": float(values[typical]),
+            "hyper_period_input_revs": tr.span_revs,
+            "max": mx,
+            "min": mn,
+            "theta_max_rad": tr.theta_max,
+            "theta_min_rad": tr.theta_min,
+        },
         "assumptions": {
             "metric": study.metric.describe(),
             "random_keys": "sample i uses jax.random.fold_in(jax.random.key(seed), i); error source j of a sample uses fold_in(that key, j)",
@@ -164,16 +196,27 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
     with atomic_output_dir(out) as tmp:
         for f in figures:
             _draw(f, tmp)
-        arrays = {"te": values, "te_rad": values_rad, "unit": unit, "metric": study.metric.name, "seed": study.seed,
-                  "index": np.arange(study.samples)} | dict(extra.arrays)
+        arrays = {
+            "te": values,
+            "te_rad": values_rad,
+            "unit": unit,
+            "metric": study.metric.name,
+            "seed": study.seed,
+            "index": np.arange(study.samples),
+        } | dict(extra.arrays)
         np.savez_compressed(tmp / "samples.npz", **arrays)
         for name, content in extra.files.items():
             np.savez_compressed(tmp / name, **content)
         plots.histogram(values, stats, unit=study.unit, metric=study.metric.label, title=study.title, path=tmp / "histogram.png")
-        plots.trace(tr.theta / (2 * math.pi), te_trace, unit=study.unit, path=tmp / "trace.png",
-                    title=f"TE of a typical sample (#{typical}, {study.metric.name} {values[typical]:.1f}{sym if angle else ''}) "
-                          f"over {tr.span_revs} input revolutions",
-                    marks=[(tr.theta_max / (2 * math.pi), mx, f"max {mx:.1f}{sym}"), (tr.theta_min / (2 * math.pi), mn, f"min {mn:.1f}{sym}")])
+        plots.trace(
+            tr.theta / (2 * math.pi),
+            te_trace,
+            unit=study.unit,
+            path=tmp / "trace.png",
+            title=f"TE of a typical sample (#{typical}, {study.metric.name} {values[typical]:.1f}{sym if angle else ''}) "
+            f"over {tr.span_revs} input revolutions",
+            marks=[(tr.theta_max / (2 * math.pi), mx, f"max {mx:.1f}{sym}"), (tr.theta_min / (2 * math.pi), mn, f"min {mn:.1f}{sym}")],
+        )
         summary["timing_s"]["total"] = time.perf_counter() - t_start
         text = report(study, summary, errs, tr)
         for o in outcomes:
@@ -197,53 +240,97 @@ def report(study: Study, s: dict, errs: dict, tr) -> str:
     lines = [f"# {study.title}", ""]
     if study.description:
         lines += [study.description, ""]
-    lines += [f"Study `{study.name}` from `{study.source_path}`, run with gearte {s['versions']['gearte']} "
-              f"(JAX {s['versions']['jax']}) on {s['created']}.", ""]
+    lines += [
+        f"Study `{study.name}` from `{study.source_path}`, run with gearte {s['versions']['gearte']} "
+        f"(JAX {s['versions']['jax']}) on {s['created']}.",
+        "",
+    ]
     if s["study"]["command"]:
         lines += ["Reproduce with:", "", f"    {s['study']['command']}", ""]
-    lines += ["## Result", "", f"{study.metric.describe()}, {shown}, over {te['n']:,} samples:", "",
-              "| n | min | max | mean | std | " + " | ".join(f"P{p:g}" for p in PERCENTILES) + " |",
-              "|---" * (5 + len(PERCENTILES)) + "|",
-              f"| {te['n']:,} | {_fmt(te['min'])} | {_fmt(te['max'])} | {_fmt(te['mean'])} | {_fmt(te['std'])} | "
-              + " | ".join(_fmt(te["percentiles"][f"{p:g}"]) for p in PERCENTILES) + " |", "",
-              "std is the sample standard deviation (n − 1); percentiles by linear interpolation.", "",
-              "![histogram](histogram.png)", "",
-              "![TE trace of a typical sample](trace.png)", "",
-              "## Drive", "", "| parameter | value |", "|---|---|"]
+    lines += [
+        "## Result",
+        "",
+        f"{study.metric.describe()}, {shown}, over {te['n']:,} samples:",
+        "",
+        "| n | min | max | mean | std | " + " | ".join(f"P{p:g}" for p in PERCENTILES) + " |",
+        "|---" * (5 + len(PERCENTILES)) + "|",
+        f"| {te['n']:,} | {_fmt(te['min'])} | {_fmt(te['max'])} | {_fmt(te['mean'])} | {_fmt(te['std'])} | "
+        + " | ".join(_fmt(te["percentiles"][f"{p:g}"]) for p in PERCENTILES)
+        + " |",
+        "",
+        "std is the sample standard deviation (n − 1); percentiles by linear interpolation.",
+        "",
+        "![histogram](histogram.png)",
+        "",
+        "![TE trace of a typical sample](trace.png)",
+        "",
+        "## Drive",
+        "",
+        "| parameter | value |",
+        "|---|---|",
+    ]
     lines += [f"| {k} | {v} |" for k, v in study.drive.describe()]
-    lines += ["", "## Error sources and how they are drawn", "",
-              "Eccentricities: magnitude in µm at a phase in rad (degrees in brackets); deviations: signed values in µm or rad.", "",
-              "| source | kind | phase symbol | instances | tolerance | value / magnitude | phase |", "|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "## Error sources and how they are drawn",
+        "",
+        "Eccentricities: magnitude in µm at a phase in rad (degrees in brackets); deviations: signed values in µm or rad.",
+        "",
+        "| source | kind | phase symbol | instances | tolerance | value / magnitude | phase |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for name, e in s["errors"].items():
         tol = "—" if e["tolerance"] is None else f"{e['tolerance']:g} {e['unit']}"
         lines.append(f"| {name} | {e['kind']} | {e['phase_symbol']} | {e['count']} | {tol} | {e['magnitude']} | {e['phase']} |")
-    lines += ["", "## Assumptions", "",
-              f"- Metric: {study.metric.describe()}.",
-              "- TE Δθ = θ_out − θ_in / i (rad inside gearte; reported in " + study.unit + f", 1 rad = {ARCSEC_PER_RAD:.3f}″).",
-              f"- Samples: {s['samples']:,}; seed {s['seed']}; {s['assumptions']['random_keys']}. Samples are computed in blocks of "
-              f"{s['block_size']}, {s['chunk_size']} per compiled call; results do not depend on the chunk size.",
-              "- Random phases are uniform on [0, 2π); magnitudes and values follow the laws in the table above.",
-              f"- Precision: {s['assumptions']['precision']}.",
-              f"- Accuracy: {s['assumptions']['accuracy']}."]
+    lines += [
+        "",
+        "## Assumptions",
+        "",
+        f"- Metric: {study.metric.describe()}.",
+        "- TE Δθ = θ_out − θ_in / i (rad inside gearte; reported in " + study.unit + f", 1 rad = {ARCSEC_PER_RAD:.3f}″).",
+        f"- Samples: {s['samples']:,}; seed {s['seed']}; {s['assumptions']['random_keys']}. Samples are computed in blocks of "
+        f"{s['block_size']}, {s['chunk_size']} per compiled call; results do not depend on the chunk size.",
+        "- Random phases are uniform on [0, 2π); magnitudes and values follow the laws in the table above.",
+        f"- Precision: {s['assumptions']['precision']}.",
+        f"- Accuracy: {s['assumptions']['accuracy']}.",
+    ]
     lines += [f"- {n}" for n in study.notes]
     typ = s["typical_sample"]
-    lines += ["", "## The typical sample", "",
-              f"Sample #{typ['index']} (closest to the median): {study.metric.name} {typ['te']:.3f}{sym if angle else ''}; over "
-              f"{typ['hyper_period_input_revs']} input revolutions the TE runs from {typ['min']:.3f}{sym} "
-              f"(at θ_in = {typ['theta_min_rad']:.6f} rad) to {typ['max']:.3f}{sym} (at θ_in = {typ['theta_max_rad']:.6f} rad).", "",
-              "| source | value or magnitude | phase (rad) |", "|---|---|---|"]
+    lines += [
+        "",
+        "## The typical sample",
+        "",
+        f"Sample #{typ['index']} (closest to the median): {study.metric.name} {typ['te']:.3f}{sym if angle else ''}; over "
+        f"{typ['hyper_period_input_revs']} input revolutions the TE runs from {typ['min']:.3f}{sym} "
+        f"(at θ_in = {typ['theta_min_rad']:.6f} rad) to {typ['max']:.3f}{sym} (at θ_in = {typ['theta_max_rad']:.6f} rad).",
+        "",
+        "| source | value or magnitude | phase (rad) |",
+        "|---|---|---|",
+    ]
     for name, e in errs.items():
         mag = e.magnitude if hasattr(e, "magnitude") else e
         mags = ", ".join(f"{float(x):.4g}" for x in np.atleast_1d(np.asarray(mag)))
         phs = ", ".join(f"{float(x) % (2 * math.pi):.4f}" for x in np.atleast_1d(np.asarray(e.phase))) if hasattr(e, "phase") else "—"
         lines.append(f"| {name} | {mags} | {phs} |")
     if tr.lines:
-        lines += ["", "Its TE spectrum (amplitude per frequency, frequency as a multiple of the input speed):", "",
-                  f"| frequency | amplitude ({sym}) |", "|---|---|"]
+        lines += [
+            "",
+            "Its TE spectrum (amplitude per frequency, frequency as a multiple of the input speed):",
+            "",
+            f"| frequency | amplitude ({sym}) |",
+            "|---|---|",
+        ]
         lines += [f"| {f} | {angle_from_rad(a, study.unit):.3f} |" for f, a in tr.lines]
-    lines += ["", "## Files", "", "- `summary.json`: the statistics above and every setting, machine-readable.",
-              f"- `samples.npz`: the {s['samples']:,} per-sample values (`te` in {study.unit if angle else 'pairs'}, `te_rad`), "
-              "with `seed` and `index`.",
-              "- `histogram.png`, `trace.png`: the plots above.", "",
-              f"Monte Carlo time {s['timing_s']['monte_carlo']:.2f} s (compilation included); total {s['timing_s']['total']:.2f} s.", ""]
+    lines += [
+        "",
+        "## Files",
+        "",
+        "- `summary.json`: the statistics above and every setting, machine-readable.",
+        f"- `samples.npz`: the {s['samples']:,} per-sample values (`te` in {study.unit if angle else 'pairs'}, `te_rad`), "
+        "with `seed` and `index`.",
+        "- `histogram.png`, `trace.png`: the plots above.",
+        "",
+        f"Monte Carlo time {s['timing_s']['monte_carlo']:.2f} s (compilation included); total {s['timing_s']['total']:.2f} s.",
+        "",
+    ]
     return "\n".join(lines)

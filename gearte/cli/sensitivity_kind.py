@@ -37,15 +37,20 @@ class Sensitivity(AbstractStudyKind):
         for x in names:
             if x not in offered:
                 hint = difflib.get_close_matches(x, list(offered), n=1)
-                raise ConfigError(f"{t.where} pathwise_metrics: {x!r} is not a metric of {study.drive.type_name}"
-                                  + (f" (did you mean {hint[0]!r}?)" if hint else "") + f"; use some of {list(offered)}")
+                raise ConfigError(
+                    f"{t.where} pathwise_metrics: {x!r} is not a metric of {study.drive.type_name}"
+                    + (f" (did you mean {hint[0]!r}?)" if hint else "")
+                    + f"; use some of {list(offered)}"
+                )
         return SensitivitySpec(n, tuple(names))
 
     def run(self, study: Study, spec: SensitivitySpec, *, progress: bool | None) -> KindOutcome:
         del progress
         metrics = study.drive.metrics
-        res = pathwise_sensitivities(study.drive, study.errors, [metrics[m] for m in spec.pathwise_metrics], key=study.seed,
-                                     n_samples=spec.pathwise_samples)
+        res = pathwise_sensitivities(
+            study.drive, study.errors, [metrics[m] for m in spec.pathwise_metrics], key=study.seed, n_samples=spec.pathwise_samples
+        )
         entry = pathwise_summary(res, study.errors, metrics, unit=study.unit)
-        return KindOutcome(study=study, key="tolerance_sensitivities", summary=entry,
-                           report=lambda s: pathwise_report(s["tolerance_sensitivities"]))
+        return KindOutcome(
+            study=study, key="tolerance_sensitivities", summary=entry, report=lambda s: pathwise_report(s["tolerance_sensitivities"])
+        )

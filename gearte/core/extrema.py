@@ -183,8 +183,9 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     def pick(remaining):
         # The c best-ranked unrefined blocks of each direction.
         def top_c(lo):
-            part = jnp.where(remaining[..., lo:lo + nb], score[..., lo:lo + nb], -jnp.inf)
+            part = jnp.where(remaining[..., lo : lo + nb], score[..., lo : lo + nb], -jnp.inf)
             return _top_indices(part, c) + lo
+
         return jnp.concatenate([top_c(0), top_c(nb)], axis=-1)
 
     def absorb(state, sel):

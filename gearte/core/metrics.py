@@ -72,7 +72,7 @@ class Peak(AbstractMetric):
         return jnp.maximum(e.max, -e.min)
 
     def describe(self) -> str:
-        return "peak = max over the whole hyper-period of |Δθ(θ_in)| (includes constant offsets; the \"amplitude\" of Wang et al. 2013)"
+        return 'peak = max over the whole hyper-period of |Δθ(θ_in)| (includes constant offsets; the "amplitude" of Wang et al. 2013)'
 
 
 class PeakToPeak(AbstractMetric):

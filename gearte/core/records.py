@@ -247,11 +247,11 @@ def spectral_lines(
         X = np.fft.rfft(resid * w)
         a = np.abs(X)
         a[:2] = 0.0
-        a[max(nyq_bin - 1, 2):] = 0.0
+        a[max(nyq_bin - 1, 2) :] = 0.0
         for f in freqs:
             k0 = f / df
             lo, hi = int(math.floor(k0 - min_separation_bins)), int(math.ceil(k0 + min_separation_bins))
-            a[max(lo, 0):max(hi + 1, 0)] = 0.0
+            a[max(lo, 0) : max(hi + 1, 0)] = 0.0
         k = int(np.argmax(a))
         peak = a[k] / gain
         if largest is not None and peak < min_relative * largest:
@@ -264,7 +264,7 @@ def spectral_lines(
             fitted = _model(t, freqs, ac, bs, offset)
             resid = x - fitted
             for j, f in enumerate(freqs):
-                own = _model(t, [f], ac[j:j + 1], bs[j:j + 1], 0.0)
+                own = _model(t, [f], ac[j : j + 1], bs[j : j + 1], 0.0)
                 Xj = np.fft.rfft((resid + own) * w)
                 k0 = int(round(f / df))
                 lo, hi = max(k0 - 2, 1), min(k0 + 3, len(Xj) - 1)
@@ -279,18 +279,21 @@ def spectral_lines(
     # a cos(2πft) + b sin(2πft) = A sin(2πft + φ) with φ = atan2(a, b); move t = 0 to the record's t = 0.
     phase = np.mod(np.arctan2(ac, bs) - _TWO_PI * f_hz * rec.time[0], _TWO_PI) if len(f_hz) else np.zeros(0)
     order = np.argsort(-amp, kind="stable")
-    return SpectralLines(freq_cpm=f_hz[order] * 60.0, amplitude=amp[order], phase=phase[order], offset=offset,
-                         residual_rms=float(np.sqrt(np.mean(resid**2))))
+    return SpectralLines(
+        freq_cpm=f_hz[order] * 60.0, amplitude=amp[order], phase=phase[order], offset=offset, residual_rms=float(np.sqrt(np.mean(resid**2)))
+    )
 
 
-def spectrum_peaks(spec: RecordSpectrum, *, exclude_cpm: Sequence[float] = (), exclude_bins: float = 2.5, count: int = 8) -> list[tuple[float, float]]:
+def spectrum_peaks(
+    spec: RecordSpectrum, *, exclude_cpm: Sequence[float] = (), exclude_bins: float = 2.5, count: int = 8
+) -> list[tuple[float, float]]:
     """The `count` largest local maxima of a spectrum, as (cpm, amplitude), skipping DC and the
     bins within `exclude_bins` of each frequency in `exclude_cpm` (lines already accounted for)."""
     a = np.asarray(spec.amplitude)
     f = np.asarray(spec.freq_cpm)
     is_peak = np.zeros(len(a), dtype=bool)
     is_peak[1:-1] = (a[1:-1] > a[:-2]) & (a[1:-1] >= a[2:])
-    is_peak[:2 * spec.zero_pad] = False
+    is_peak[: 2 * spec.zero_pad] = False
     for c in exclude_cpm:
         is_peak &= np.abs(f - c) > exclude_bins * spec.resolution_cpm
     idx = np.nonzero(is_peak)[0]
@@ -319,7 +322,7 @@ def record_envelope(rec: Record, *, band_cpm: tuple[float, float], taper: float 
     m = int(taper * n)
     if m > 0:
         ramp = 0.5 - 0.5 * np.cos(math.pi * np.arange(m) / m)
-        w[:m], w[n - m:] = ramp, ramp[::-1]
+        w[:m], w[n - m :] = ramp, ramp[::-1]
     X = np.fft.fft((x - x.mean()) * w)
     f = np.fft.fftfreq(n, d=1.0 / rec.sample_rate_hz) * 60.0
     keep = (f >= lo) & (f <= hi)

@@ -51,7 +51,9 @@ class Table:
             self._fail(key, f"expected a string, got {v!r}")
         if choices is not None and v not in choices:
             hint = difflib.get_close_matches(v, choices, n=1)
-            self._fail(key, f"must be one of {', '.join(repr(c) for c in choices)}, got {v!r}" + (f" (did you mean {hint[0]!r}?)" if hint else ""))
+            self._fail(
+                key, f"must be one of {', '.join(repr(c) for c in choices)}, got {v!r}" + (f" (did you mean {hint[0]!r}?)" if hint else "")
+            )
         return v
 
     def integer(self, key: str, default: Any = _MISSING, *, minimum: int | None = None) -> int:
@@ -76,7 +78,9 @@ class Table:
         if positive and not v > 0:
             self._fail(key, f"must be > 0, got {v:g}")
         if minimum is not None and v < minimum:
-            self._fail(key, f"must be ≥ {minimum:g}, got {v:g}" + (" (tolerances and magnitudes cannot be negative)" if minimum == 0 else ""))
+            self._fail(
+                key, f"must be ≥ {minimum:g}, got {v:g}" + (" (tolerances and magnitudes cannot be negative)" if minimum == 0 else "")
+            )
         return v
 
     def boolean(self, key: str, default: Any = _MISSING) -> bool:
@@ -114,7 +118,8 @@ class Table:
             k = unknown[0]
             hint = difflib.get_close_matches(k, sorted(self.used), n=1)
             raise ConfigError(
-                f"{self.where}: unknown key `{k}`" + (f" (did you mean `{hint[0]}`?)" if hint else "")
+                f"{self.where}: unknown key `{k}`"
+                + (f" (did you mean `{hint[0]}`?)" if hint else "")
                 + f"; allowed here: {', '.join(sorted(self.used))}"
             )
 

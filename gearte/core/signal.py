@@ -85,12 +85,23 @@ class Components(eqx.Module):
     freq: tuple[Fraction, ...] = eqx.field(static=True)
     labels: tuple[str, ...] = eqx.field(static=True)
 
-    def __init__(self, amplitude: ArrayLike, phase: ArrayLike, freq: Sequence[FrequencyLike], gain: ArrayLike = 1.0, labels: Sequence[str] | None = None):
+    def __init__(
+        self,
+        amplitude: ArrayLike,
+        phase: ArrayLike,
+        freq: Sequence[FrequencyLike],
+        gain: ArrayLike = 1.0,
+        labels: Sequence[str] | None = None,
+    ):
         self.freq = tuple(as_frequency(f, name=f"freq[{i}]") for i, f in enumerate(freq))
         n = len(self.freq)
         self.amplitude = jnp.asarray(amplitude, dtype=float)
         self.phase = jnp.asarray(phase, dtype=float)
-        self.gain = jnp.broadcast_to(jnp.asarray(gain, dtype=float), self.amplitude.shape[:-1] + (n,)) if jnp.ndim(gain) == 0 else jnp.asarray(gain, dtype=float)
+        self.gain = (
+            jnp.broadcast_to(jnp.asarray(gain, dtype=float), self.amplitude.shape[:-1] + (n,))
+            if jnp.ndim(gain) == 0
+            else jnp.asarray(gain, dtype=float)
+        )
         for nm, arr in (("amplitude", self.amplitude), ("phase", self.phase), ("gain", self.gain)):
             if arr.ndim == 0 or arr.shape[-1] != n:
                 raise ValueError(f"Components: `{nm}` must have a last axis of length {n} (one per frequency), got shape {arr.shape}")

@@ -55,8 +55,13 @@ class TwoScaleExtrema(eqx.Module):
 
 def _split(signal: TESignal, j_fast: int) -> tuple[TESignal, Array, Array]:
     keep = [j for j in range(len(signal.orders)) if j != j_fast]
-    slow = TESignal(offset=signal.offset, cos_coef=signal.cos_coef[..., keep], sin_coef=signal.sin_coef[..., keep],
-                    orders=tuple(signal.orders[j] for j in keep), fundamental=signal.fundamental)
+    slow = TESignal(
+        offset=signal.offset,
+        cos_coef=signal.cos_coef[..., keep],
+        sin_coef=signal.sin_coef[..., keep],
+        orders=tuple(signal.orders[j] for j in keep),
+        fundamental=signal.fundamental,
+    )
     return slow, signal.cos_coef[..., j_fast], signal.sin_coef[..., j_fast]
 
 
@@ -78,8 +83,9 @@ def _newton_best(signal: TESignal, tau: Array, sign: float, steps: int, max_step
     return jnp.take_along_axis(t, i, axis=-1)[..., 0], sign * jnp.take_along_axis(v, i, axis=-1)[..., 0]
 
 
-def _one_side(signal: TESignal, slow: TESignal, bc: Array, bs: Array, k_fast: int, sign: float,
-              candidates: int, newton_steps: int) -> tuple[Array, Array, Array]:
+def _one_side(
+    signal: TESignal, slow: TESignal, bc: Array, bs: Array, k_fast: int, sign: float, candidates: int, newton_steps: int
+) -> tuple[Array, Array, Array]:
     """τ and value of the maximum (sign = +1) or minimum (sign = −1) of F, and the slow part's extreme value."""
     if slow.orders:
         m = grid_size(slow.orders, 16)
@@ -153,8 +159,14 @@ def extrema_two_scale(signal: TESignal, *, fast_order: int | None = None, candid
         out[name] = evaluate(signal, theta)
         out["theta_" + name] = theta
         out[name + "_gap"] = jax.lax.stop_gradient(jnp.maximum(sign * (slow_best + sign * b - val), 0.0))
-    return TwoScaleExtrema(max=out["max"], min=out["min"], theta_max=out["theta_max"], theta_min=out["theta_min"],
-                           max_gap=out["max_gap"], min_gap=out["min_gap"])
+    return TwoScaleExtrema(
+        max=out["max"],
+        min=out["min"],
+        theta_max=out["theta_max"],
+        theta_min=out["theta_min"],
+        max_gap=out["max_gap"],
+        min_gap=out["min_gap"],
+    )
 
 
 def fast_line_order(signal: TESignal, *, separation: int = 8) -> int | None:

@@ -214,9 +214,19 @@ class CycloidAnalysis(eqx.Module):
     sweep_revolutions: int = eqx.field(static=True)
     normal: bool = eqx.field(static=True)
 
-    def __init__(self, *, budget_mm: float = 0.2, width_mm: float | None = None, positions_per_pitch: int = 2,
-                 revolutions: int = 1, input_angle: float | None = None, pitch_points: int = 64,
-                 sweep_points_per_pitch: int = 16, sweep_revolutions: int = 1, normal: bool = True):
+    def __init__(
+        self,
+        *,
+        budget_mm: float = 0.2,
+        width_mm: float | None = None,
+        positions_per_pitch: int = 2,
+        revolutions: int = 1,
+        input_angle: float | None = None,
+        pitch_points: int = 64,
+        sweep_points_per_pitch: int = 16,
+        sweep_revolutions: int = 1,
+        normal: bool = True,
+    ):
         self.budget_mm = as_float("budget_mm", budget_mm, nonnegative=True, hint="the tangential deformation budget is a length ≥ 0 mm")
         w = self.budget_mm / 10.0 if width_mm is None else as_float("width_mm", width_mm, positive=True)
         if not w > 0:
@@ -268,18 +278,32 @@ class CycloidPin(AbstractGridDrive):
     type_name: ClassVar[str] = "cycloid_pin"
     linear: ClassVar[bool] = False
 
-    def __init__(self, z_pins: int, *, pin_circle_radius: float, pin_radius: float, eccentricity: float | None = None,
-                 K1: float | None = None, z_lobes: int | None = None, modification: CycloidModification | None = None,
-                 wheel_pin_circle_radius: float | None = None, wheel_pin_radius: float | None = None,
-                 rotation_modification: float | None = None, analysis: CycloidAnalysis | None = None,
-                 reference: CycloidErrors | Mapping[str, Any] | None = None, reference_record: str | None = None):
+    def __init__(
+        self,
+        z_pins: int,
+        *,
+        pin_circle_radius: float,
+        pin_radius: float,
+        eccentricity: float | None = None,
+        K1: float | None = None,
+        z_lobes: int | None = None,
+        modification: CycloidModification | None = None,
+        wheel_pin_circle_radius: float | None = None,
+        wheel_pin_radius: float | None = None,
+        rotation_modification: float | None = None,
+        analysis: CycloidAnalysis | None = None,
+        reference: CycloidErrors | Mapping[str, Any] | None = None,
+        reference_record: str | None = None,
+    ):
         zb = as_int("z_pins", z_pins, minimum=4)
         za = zb - 1
         if z_lobes is not None:
             zl = as_int("z_lobes", z_lobes, minimum=1)
             if zl != za:
-                raise ValueError(f"z_lobes: a cycloid-pin stage has one lobe fewer than pins, z_lobes = z_pins − 1 = {za}; "
-                                 f"got z_lobes = {zl} with z_pins = {zb}")
+                raise ValueError(
+                    f"z_lobes: a cycloid-pin stage has one lobe fewer than pins, z_lobes = z_pins − 1 = {za}; "
+                    f"got z_lobes = {zl} with z_pins = {zb}"
+                )
         R = _number("pin_circle_radius", pin_circle_radius, positive=True)
         r = _number("pin_radius", pin_radius, positive=True)
         if (eccentricity is None) == (K1 is None):
@@ -291,20 +315,29 @@ class CycloidPin(AbstractGridDrive):
             a = k * R / zb
         K = a * zb / R
         if not K < 1.0:
-            raise ValueError(f"K1: the short-width coefficient K_1 = a z_b / R_z = {K:.6g} must be < 1 (a curtate "
-                             f"epicycloid); reduce the eccentricity below R_z / z_b = {R / zb:.6g} mm")
+            raise ValueError(
+                f"K1: the short-width coefficient K_1 = a z_b / R_z = {K:.6g} must be < 1 (a curtate "
+                f"epicycloid); reduce the eccentricity below R_z / z_b = {R / zb:.6g} mm"
+            )
         if not 2.0 * r < 2.0 * R * math.sin(math.pi / zb):
-            raise ValueError(f"pin_radius: pins of radius {r:g} mm overlap on a pin circle of radius {R:g} mm with "
-                             f"{zb} pins; it must be < R_z sin(π/z_b) = {R * math.sin(math.pi / zb):.6g} mm")
+            raise ValueError(
+                f"pin_radius: pins of radius {r:g} mm overlap on a pin circle of radius {R:g} mm with "
+                f"{zb} pins; it must be < R_z sin(π/z_b) = {R * math.sin(math.pi / zb):.6g} mm"
+            )
         rho = min_curvature_radius(R, a, zb)
         if not r < rho:
-            raise ValueError(f"pin_radius: r_z = {r:g} mm is not below the smallest radius of curvature of the "
-                             f"theoretical profile, {rho:.6g} mm: the tooth profile would be undercut (looped); "
-                             "use smaller pins, a larger pin circle or another K_1")
-        if modification is not None and (wheel_pin_circle_radius is not None or wheel_pin_radius is not None
-                                         or rotation_modification is not None):
-            raise ValueError("modification: give a CycloidModification or the wheel radii (wheel_pin_circle_radius, "
-                             "wheel_pin_radius, rotation_modification), not both")
+            raise ValueError(
+                f"pin_radius: r_z = {r:g} mm is not below the smallest radius of curvature of the "
+                f"theoretical profile, {rho:.6g} mm: the tooth profile would be undercut (looped); "
+                "use smaller pins, a larger pin circle or another K_1"
+            )
+        if modification is not None and (
+            wheel_pin_circle_radius is not None or wheel_pin_radius is not None or rotation_modification is not None
+        ):
+            raise ValueError(
+                "modification: give a CycloidModification or the wheel radii (wheel_pin_circle_radius, "
+                "wheel_pin_radius, rotation_modification), not both"
+            )
         if modification is None:
             RZ = R if wheel_pin_circle_radius is None else _number("wheel_pin_circle_radius", wheel_pin_circle_radius, positive=True)
             rZ = r if wheel_pin_radius is None else _number("wheel_pin_radius", wheel_pin_radius, positive=True)
@@ -357,15 +390,18 @@ class CycloidPin(AbstractGridDrive):
 
     def describe(self) -> list[tuple[str, str]]:
         m = self.modification
-        return [("pins z_b", str(self.z_pins)), ("lobes z_a", str(self.z_lobes)),
-                ("pin-circle radius R_z", f"{float(self.pin_circle_radius):g} mm"),
-                ("pin radius r_z", f"{float(self.pin_radius):g} mm"),
-                ("eccentricity a", f"{float(self.eccentricity):g} mm"), ("K_1 = a z_b / R_z", f"{float(self.K1):.6g}"),
-                ("wheel R_Z (shift ΔR_Z)", f"{float(self.wheel_pin_circle_radius):.6g} mm ({float(m.shift):+.6g} mm)"),
-                ("wheel r_Z (equidistant Δr_Z)", f"{float(self.wheel_pin_radius):.6g} mm ({float(m.equidistant):+.6g} mm)"),
-                ("rotation modification δ", f"{float(m.rotation) * ARCSEC_PER_RAD:.6g}″"),
-                ("radial clearance at root and tip Δr_Z − ΔR_Z", f"{float(self.radial_clearance()):.6g} mm")]
-
+        return [
+            ("pins z_b", str(self.z_pins)),
+            ("lobes z_a", str(self.z_lobes)),
+            ("pin-circle radius R_z", f"{float(self.pin_circle_radius):g} mm"),
+            ("pin radius r_z", f"{float(self.pin_radius):g} mm"),
+            ("eccentricity a", f"{float(self.eccentricity):g} mm"),
+            ("K_1 = a z_b / R_z", f"{float(self.K1):.6g}"),
+            ("wheel R_Z (shift ΔR_Z)", f"{float(self.wheel_pin_circle_radius):.6g} mm ({float(m.shift):+.6g} mm)"),
+            ("wheel r_Z (equidistant Δr_Z)", f"{float(self.wheel_pin_radius):.6g} mm ({float(m.equidistant):+.6g} mm)"),
+            ("rotation modification δ", f"{float(m.rotation) * ARCSEC_PER_RAD:.6g}″"),
+            ("radial clearance at root and tip Δr_Z − ΔR_Z", f"{float(self.radial_clearance()):.6g} mm"),
+        ]
 
     # ------------------------------------------------------------ the drive protocol
 
@@ -405,8 +441,15 @@ class CycloidPin(AbstractGridDrive):
         theta = revolution_angles(self, a.sweep_points_per_pitch, revolutions=a.sweep_revolutions)
         te = np.asarray(sweep(self, errors, theta, normal=False).rotation_error)
         i, k = int(np.argmax(te)), int(np.argmin(te))
-        return Trace(theta=theta, te=te, span_revs=str(a.sweep_revolutions), max=float(te[i]), min=float(te[k]),
-                     theta_max=float(theta[i]), theta_min=float(theta[k]))
+        return Trace(
+            theta=theta,
+            te=te,
+            span_revs=str(a.sweep_revolutions),
+            max=float(te[i]),
+            min=float(te[k]),
+            theta_max=float(theta[i]),
+            theta_min=float(theta[k]),
+        )
 
     @classmethod
     def from_table(cls, table: Table) -> CycloidPin:
@@ -421,9 +464,11 @@ class CycloidPin(AbstractGridDrive):
     def accuracy(self) -> str:
         a = self.analysis
         n = a.positions_per_pitch * self.z_pins * a.revolutions
-        return (f"taken on a grid of {n} input angles ({a.positions_per_pitch} per pin pitch of {360 / self.z_pins:.4g}° over "
-                f"{a.revolutions} input revolution(s)), not between them; at each angle the contact of every pin is solved "
-                "by a bracketed Newton iteration to a radius residual below 1e-9 mm (convergence checked and reported)")
+        return (
+            f"taken on a grid of {n} input angles ({a.positions_per_pitch} per pin pitch of {360 / self.z_pins:.4g}° over "
+            f"{a.revolutions} input revolution(s)), not between them; at each angle the contact of every pin is solved "
+            "by a bracketed Newton iteration to a radius residual below 1e-9 mm (convergence checked and reported)"
+        )
 
     def bytes_per_sample(self) -> int:
         n = self.analysis.positions_per_pitch * self.z_pins * self.analysis.revolutions
@@ -432,8 +477,9 @@ class CycloidPin(AbstractGridDrive):
     def sample_outputs(self, errors, response: Clearances) -> dict[str, Array]:
         """Per sample of a `gearte run`: the report's clearance vector (`gearte.drives.cycloid_pin_outputs.sample_vector`),
         from the same sweep as the metric."""
-        return {"clearances": sample_vector(self, checked_errors(self, errors), response, jnp.asarray(input_angle(self)),
-                                            self.analysis.normal)}
+        return {
+            "clearances": sample_vector(self, checked_errors(self, errors), response, jnp.asarray(input_angle(self)), self.analysis.normal)
+        }
 
     def study_outputs(self, context: AbstractStudyContext) -> StudyOutputs:
         """The clearance analysis of the reference reducer, the Monte Carlo of clearances and loaded pairs, and the
@@ -458,10 +504,40 @@ class CycloidPin(AbstractGridDrive):
 
 # The public API of the cycloid-pin modules, in one place (``gearte.drives.cycloid_pin.clearances`` etc.).
 __all__ = (
-    "ERROR_FIELDS", "ERROR_UNITS", "PER_PIN", "PER_SPACE", "SOURCE_TEXT", "Clearances", "CycloidAnalysis", "CycloidErrors",
-    "CycloidModification", "CycloidPin", "LoadedPairs", "LoadedPairsMin", "LostMotion", "LostMotionMin", "PinLayout",
-    "RotationErrorPeakToPeak", "Sensitivity", "as_cycloid_errors", "check_modification", "checked_errors", "clearances",
-    "disc_outline", "first_order_clearance", "loaded_pairs", "min_curvature_radius", "normal_clearance", "pin_layout",
-    "pitch_angles", "revolution_angles", "sensitivities", "smooth_loaded_pairs", "sweep", "theoretical_pairs",
-    "theoretical_profile", "tooth_profile", "unit_metrics",
+    "ERROR_FIELDS",
+    "ERROR_UNITS",
+    "PER_PIN",
+    "PER_SPACE",
+    "SOURCE_TEXT",
+    "Clearances",
+    "CycloidAnalysis",
+    "CycloidErrors",
+    "CycloidModification",
+    "CycloidPin",
+    "LoadedPairs",
+    "LoadedPairsMin",
+    "LostMotion",
+    "LostMotionMin",
+    "PinLayout",
+    "RotationErrorPeakToPeak",
+    "Sensitivity",
+    "as_cycloid_errors",
+    "check_modification",
+    "checked_errors",
+    "clearances",
+    "disc_outline",
+    "first_order_clearance",
+    "loaded_pairs",
+    "min_curvature_radius",
+    "normal_clearance",
+    "pin_layout",
+    "pitch_angles",
+    "revolution_angles",
+    "sensitivities",
+    "smooth_loaded_pairs",
+    "sweep",
+    "theoretical_pairs",
+    "theoretical_profile",
+    "tooth_profile",
+    "unit_metrics",
 )

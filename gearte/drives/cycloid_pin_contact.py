@@ -41,12 +41,12 @@ class PinLayout(eqx.Module):
     - `radius`: r′, mm; `pin_circle`: R′, mm.
     """
 
-    centre: Float[Array, "zb 2"]     # pin centres relative to the disc centre, converted frame, mm
-    space: Int[Array, " zb"]         # tooth space each pin sits in
-    side: Float[Array, " zb"]        # +1 driving flank, −1 reverse flank
-    phi: Float[Array, " zb"]         # nominal flank parameter (pin angle from the crank), rad
-    radius: Float[Array, ""]         # r′, mm
-    pin_circle: Float[Array, ""]     # R′, mm
+    centre: Float[Array, "zb 2"]  # pin centres relative to the disc centre, converted frame, mm
+    space: Int[Array, " zb"]  # tooth space each pin sits in
+    side: Float[Array, " zb"]  # +1 driving flank, −1 reverse flank
+    phi: Float[Array, " zb"]  # nominal flank parameter (pin angle from the crank), rad
+    radius: Float[Array, ""]  # r′, mm
+    pin_circle: Float[Array, ""]  # R′, mm
 
 
 def _pins(drive: CycloidPin, err: CycloidErrors, theta_T) -> PinLayout:
@@ -57,10 +57,18 @@ def _pins(drive: CycloidPin, err: CycloidErrors, theta_T) -> PinLayout:
     psi = psi_nom + err.pin_tangential * UM / R1
     rad = R1 + err.pin_radial * UM
     A1 = drive.eccentricity + err.eccentricity * UM
-    obx = (err.pin_wheel_offset * jnp.cos(err.pin_wheel_offset_phase)
-           + err.pin_circle_eccentricity * jnp.cos(err.pin_circle_eccentricity_phase + theta_T)) * UM
-    oby = -A1 + (err.pin_wheel_offset * jnp.sin(err.pin_wheel_offset_phase)
-                 + err.pin_circle_eccentricity * jnp.sin(err.pin_circle_eccentricity_phase + theta_T)) * UM
+    obx = (
+        err.pin_wheel_offset * jnp.cos(err.pin_wheel_offset_phase)
+        + err.pin_circle_eccentricity * jnp.cos(err.pin_circle_eccentricity_phase + theta_T)
+    ) * UM
+    oby = (
+        -A1
+        + (
+            err.pin_wheel_offset * jnp.sin(err.pin_wheel_offset_phase)
+            + err.pin_circle_eccentricity * jnp.sin(err.pin_circle_eccentricity_phase + theta_T)
+        )
+        * UM
+    )
     cx = obx - rad * jnp.sin(psi) - err.disc_offset * jnp.cos(err.disc_offset_phase) * UM
     cy = oby + rad * jnp.cos(psi) - err.disc_offset * jnp.sin(err.disc_offset_phase) * UM
     # Pin j meets the theoretical curve at parameter ψ_j − 2πj (module notes): space n, local φ. A tiny
@@ -95,10 +103,10 @@ RESIDUAL_TOL_MM = 1e-9
 
 
 class _Contact(eqx.Module):
-    rotation: Float[Array, " zb"]      # θ_j − θ_theory, rad (finite; see `reachable`)
-    phi: Float[Array, " zb"]           # flank parameter of the contact point
-    reachable: Bool[Array, " zb"]      # the pin is not beyond the tooth tip
-    interference: Bool[Array, " zb"]   # the pin is deeper than the tooth-space bottom at every rotation
+    rotation: Float[Array, " zb"]  # θ_j − θ_theory, rad (finite; see `reachable`)
+    phi: Float[Array, " zb"]  # flank parameter of the contact point
+    reachable: Bool[Array, " zb"]  # the pin is not beyond the tooth tip
+    interference: Bool[Array, " zb"]  # the pin is deeper than the tooth-space bottom at every rotation
     converged: Bool[Array, " zb"]
 
 
@@ -293,11 +301,24 @@ def _analyse(drive: CycloidPin, err: CycloidErrors, theta_T, normal: bool) -> Cl
         nc, nc_ok = _normal(drive, err, pins, con.phi, turn)
     else:
         nc, nc_ok = jnp.full(pins.side.shape, jnp.nan), True
-    return Clearances(input_angle=theta_T, space=pins.space, rotation_to_contact=jnp.where(con.reachable, con.rotation, jnp.where(drive_side, inf, -inf)),
-                      on_driving_flank=drive_side, reachable=con.reachable, interference=con.interference,
-                      converged=con.converged & nc_ok, contact_pin=i_f, reverse_contact_pin=i_r, rotation_error=te_f,
-                      reverse_rotation_error=te_r, lost_motion=te_f - te_r, tangential_clearance=tang,
-                      tangential_arc=arc, normal_clearance=nc, pin_circle_radius=pins.pin_circle)
+    return Clearances(
+        input_angle=theta_T,
+        space=pins.space,
+        rotation_to_contact=jnp.where(con.reachable, con.rotation, jnp.where(drive_side, inf, -inf)),
+        on_driving_flank=drive_side,
+        reachable=con.reachable,
+        interference=con.interference,
+        converged=con.converged & nc_ok,
+        contact_pin=i_f,
+        reverse_contact_pin=i_r,
+        rotation_error=te_f,
+        reverse_rotation_error=te_r,
+        lost_motion=te_f - te_r,
+        tangential_clearance=tang,
+        tangential_arc=arc,
+        normal_clearance=nc,
+        pin_circle_radius=pins.pin_circle,
+    )
 
 
 @eqx.filter_jit
@@ -343,8 +364,7 @@ def _normal_jit(drive, err, theta_T, rotation):
     return _normal(drive, err, pins, pins.phi, theta_T * (drive.z_pins / drive.z_lobes) + rotation)[0]
 
 
-def normal_clearance(drive: CycloidPin, errors: ErrorsLike, input_angle: ArrayLike, *,
-                     rotation: ArrayLike = 0.0) -> Float[Array, " zb"]:
+def normal_clearance(drive: CycloidPin, errors: ErrorsLike, input_angle: ArrayLike, *, rotation: ArrayLike = 0.0) -> Float[Array, " zb"]:
     """Normal clearance (mm) of every pin with the disc at a given rotation, not at its contact.
 
     **Arguments:**
@@ -400,8 +420,9 @@ def theoretical_pairs(drive: CycloidPin) -> int:
     return drive.z_pins // 2
 
 
-def first_order_clearance(drive: CycloidPin, phi: ArrayLike, *, pin_circle_radius: float | None = None,
-                          pin_radius: float | None = None) -> Float[Array, ...]:
+def first_order_clearance(
+    drive: CycloidPin, phi: ArrayLike, *, pin_circle_radius: float | None = None, pin_radius: float | None = None
+) -> Float[Array, ...]:
     """First-order rotation to contact (rad) of a pin at flank parameter φ for the shift/equidistant
     modification alone (no errors; optionally actual R′, r′ in mm):
     [Δr S − ΔR (1 − K_1 cos φ)] / (a z_a sin φ), with Δr = r_Z − r′, ΔR = R_Z − R′. For reports and checks."""
@@ -416,6 +437,16 @@ def first_order_clearance(drive: CycloidPin, phi: ArrayLike, *, pin_circle_radiu
 
 
 __all__ = (
-    "Clearances", "PinLayout", "clearances", "first_order_clearance", "loaded_pairs", "normal_clearance", "pin_layout",
-    "pitch_angles", "revolution_angles", "smooth_loaded_pairs", "sweep", "theoretical_pairs",
+    "Clearances",
+    "PinLayout",
+    "clearances",
+    "first_order_clearance",
+    "loaded_pairs",
+    "normal_clearance",
+    "pin_layout",
+    "pitch_angles",
+    "revolution_angles",
+    "smooth_loaded_pairs",
+    "sweep",
+    "theoretical_pairs",
 )

@@ -30,7 +30,9 @@ UM = MM_PER_UM  # mm per µm
 
 
 def _number(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
-    return as_float(name, value, positive=positive, nonnegative=nonnegative, hint="a radius or length cannot be zero or negative" if positive else "")
+    return as_float(
+        name, value, positive=positive, nonnegative=nonnegative, hint="a radius or length cannot be zero or negative" if positive else ""
+    )
 
 
 def min_curvature_radius(pin_circle_radius: float, eccentricity: float, z_pins: int, *, points: int = 20001) -> float:
@@ -90,7 +92,11 @@ def check_modification(drive: CycloidPin) -> None:
     RZ = float(drive.wheel_pin_circle_radius)
     rZ = float(drive.wheel_pin_radius)
     rot = float(drive.modification.rotation)
-    for name, v in (("modification.shift", RZ - R), ("modification.equidistant", rZ - float(drive.pin_radius)), ("modification.rotation", rot)):
+    for name, v in (
+        ("modification.shift", RZ - R),
+        ("modification.equidistant", rZ - float(drive.pin_radius)),
+        ("modification.rotation", rot),
+    ):
         if not math.isfinite(v):
             raise ValueError(f"{name}: must be finite, got {v}")
     if not RZ > 0:
@@ -99,16 +105,21 @@ def check_modification(drive: CycloidPin) -> None:
         raise ValueError(f"modification.equidistant: the wheel's pin radius r_Z = {rZ:g} mm must be > 0")
     KZ = a * zb / RZ
     if not KZ < 1.0:
-        raise ValueError(f"modification.shift: with R_Z = {RZ:g} mm the wheel's K = a z_b / R_Z = {KZ:.6g} is ≥ 1; "
-                         "use a smaller negative shift")
+        raise ValueError(
+            f"modification.shift: with R_Z = {RZ:g} mm the wheel's K = a z_b / R_Z = {KZ:.6g} is ≥ 1; use a smaller negative shift"
+        )
     rho = min_curvature_radius(RZ, a, zb)
     if not rZ < rho:
-        raise ValueError(f"modification.equidistant: the wheel's pin radius r_Z = {rZ:g} mm is not below the smallest "
-                         f"radius of curvature of its theoretical profile, {rho:.6g} mm: the ground profile would be "
-                         "undercut (looped); reduce the equidistant modification")
+        raise ValueError(
+            f"modification.equidistant: the wheel's pin radius r_Z = {rZ:g} mm is not below the smallest "
+            f"radius of curvature of its theoretical profile, {rho:.6g} mm: the ground profile would be "
+            "undercut (looped); reduce the equidistant modification"
+        )
     if abs(rot) >= math.pi / (2 * (zb - 1)):
-        raise ValueError(f"modification.rotation: {rot:g} rad is not a small rotation; it must be below a quarter of a "
-                         f"tooth space, π/(2 z_a) = {math.pi / (2 * (zb - 1)):.6g} rad")
+        raise ValueError(
+            f"modification.rotation: {rot:g} rad is not a small rotation; it must be below a quarter of a "
+            f"tooth space, π/(2 z_a) = {math.pi / (2 * (zb - 1)):.6g} rad"
+        )
 
 
 class CycloidErrors(eqx.Module):
@@ -162,14 +173,30 @@ class CycloidErrors(eqx.Module):
     pin_circle_eccentricity: Float[Array, ""]
     pin_circle_eccentricity_phase: Float[Array, ""]
 
-    def __init__(self, *, dressing_x: ArrayLike = 0.0, dressing_y: ArrayLike = 0.0, infeed: ArrayLike = 0.0,
-                 index_offset: ArrayLike = 0.0, indexing: ArrayLike = 0.0, setup_eccentricity: ArrayLike = 0.0,
-                 setup_phase: ArrayLike = 0.0, mandrel_runout: ArrayLike = 0.0, mandrel_phase: ArrayLike = 0.0,
-                 pin_circle_radius: ArrayLike = 0.0, pin_radius: ArrayLike = 0.0, eccentricity: ArrayLike = 0.0,
-                 pin_tangential: ArrayLike = 0.0, pin_radial: ArrayLike = 0.0, disc_offset: ArrayLike = 0.0,
-                 disc_offset_phase: ArrayLike = 0.0, pin_wheel_offset: ArrayLike = 0.0,
-                 pin_wheel_offset_phase: ArrayLike = 0.0, pin_circle_eccentricity: ArrayLike = 0.0,
-                 pin_circle_eccentricity_phase: ArrayLike = 0.0):
+    def __init__(
+        self,
+        *,
+        dressing_x: ArrayLike = 0.0,
+        dressing_y: ArrayLike = 0.0,
+        infeed: ArrayLike = 0.0,
+        index_offset: ArrayLike = 0.0,
+        indexing: ArrayLike = 0.0,
+        setup_eccentricity: ArrayLike = 0.0,
+        setup_phase: ArrayLike = 0.0,
+        mandrel_runout: ArrayLike = 0.0,
+        mandrel_phase: ArrayLike = 0.0,
+        pin_circle_radius: ArrayLike = 0.0,
+        pin_radius: ArrayLike = 0.0,
+        eccentricity: ArrayLike = 0.0,
+        pin_tangential: ArrayLike = 0.0,
+        pin_radial: ArrayLike = 0.0,
+        disc_offset: ArrayLike = 0.0,
+        disc_offset_phase: ArrayLike = 0.0,
+        pin_wheel_offset: ArrayLike = 0.0,
+        pin_wheel_offset_phase: ArrayLike = 0.0,
+        pin_circle_eccentricity: ArrayLike = 0.0,
+        pin_circle_eccentricity_phase: ArrayLike = 0.0,
+    ):
         f = lambda x: jnp.asarray(x, dtype=float)
         self.dressing_x, self.dressing_y, self.infeed = f(dressing_x), f(dressing_y), f(infeed)
         self.index_offset, self.indexing = f(index_offset), f(indexing)
@@ -278,8 +305,16 @@ def _placement(drive: CycloidPin, err: CycloidErrors, n, side) -> _Placement:
     beta = jnp.asarray(n).astype(float) * (TWO_PI / drive.z_lobes) + err.index_offset + err.indexing[n]
     ex = err.setup_eccentricity * jnp.cos(err.setup_phase) + err.mandrel_runout * jnp.cos(err.mandrel_phase)
     ey = err.setup_eccentricity * jnp.sin(err.setup_phase) + err.mandrel_runout * jnp.sin(err.mandrel_phase)
-    return _Placement(jnp.cos(side * m.rotation), -jnp.sin(side * m.rotation), err.dressing_x * UM,
-                      (err.dressing_y + err.infeed[n]) * UM, jnp.cos(beta), -jnp.sin(beta), ex * UM, ey * UM)
+    return _Placement(
+        jnp.cos(side * m.rotation),
+        -jnp.sin(side * m.rotation),
+        err.dressing_x * UM,
+        (err.dressing_y + err.infeed[n]) * UM,
+        jnp.cos(beta),
+        -jnp.sin(beta),
+        ex * UM,
+        ey * UM,
+    )
 
 
 def _placed_curve(drive: CycloidPin, pl: _Placement, phi, d):
@@ -297,7 +332,9 @@ def _space_curve(drive: CycloidPin, err: CycloidErrors, n, side, phi, d):
     return _placed_curve(drive, _placement(drive, err, n, side), phi, d)
 
 
-def tooth_profile(drive: CycloidPin, phi: ArrayLike, *, errors: CycloidErrors | Mapping[str, Any] | None = None, space: int = 0) -> Float[Array, "... 2"]:
+def tooth_profile(
+    drive: CycloidPin, phi: ArrayLike, *, errors: CycloidErrors | Mapping[str, Any] | None = None, space: int = 0
+) -> Float[Array, "... 2"]:
     """Points of the actual flank of tooth space `space` (mm, disc frame centred on the bore).
 
     `phi` ∈ [−π, π] is the flank parameter (φ > 0: driving half, φ < 0: reverse half).
@@ -309,9 +346,10 @@ def tooth_profile(drive: CycloidPin, phi: ArrayLike, *, errors: CycloidErrors | 
     return jnp.stack([x, y], axis=-1)
 
 
-def disc_outline(drive: CycloidPin, *, errors: CycloidErrors | Mapping[str, Any] | None = None, points_per_space: int = 200) -> Float[Array, "m 2"]:
+def disc_outline(
+    drive: CycloidPin, *, errors: CycloidErrors | Mapping[str, Any] | None = None, points_per_space: int = 200
+) -> Float[Array, "m 2"]:
     """The whole actual disc outline (mm), all z_a tooth spaces in order, for plotting."""
     phi = jnp.linspace(-math.pi, math.pi, points_per_space)
     pts = [tooth_profile(drive, phi, errors=errors, space=n) for n in range(drive.z_lobes)]
     return jnp.concatenate(pts, axis=0)
-

@@ -95,8 +95,7 @@ class RotationErrorPeakToPeak(AbstractMetric):
         return jnp.max(te) - jnp.min(te)
 
     def describe(self) -> str:
-        return ("peak-to-peak of the rotation error Δθ = θ_a − (z_b/z_a) θ_T of the contacting pair (forward load) "
-                "over the input-angle grid")
+        return "peak-to-peak of the rotation error Δθ = θ_a − (z_b/z_a) θ_T of the contacting pair (forward load) over the input-angle grid"
 
 
 class LoadedPairs(AbstractMetric):
@@ -116,8 +115,10 @@ class LoadedPairs(AbstractMetric):
         return jnp.mean(_smooth_counts(drive, response))
 
     def describe(self) -> str:
-        return ("loaded pairs = driving-flank pins whose tangential clearance on the pin circle is within the deformation "
-                "budget, the mean over the input-angle grid (smooth surrogate: Σ σ((budget − arc)/w))")
+        return (
+            "loaded pairs = driving-flank pins whose tangential clearance on the pin circle is within the deformation "
+            "budget, the mean over the input-angle grid (smooth surrogate: Σ σ((budget − arc)/w))"
+        )
 
 
 class LoadedPairsMin(AbstractMetric):
@@ -146,8 +147,17 @@ METRICS: tuple[type[AbstractMetric], ...] = (LostMotion, LostMotionMin, Rotation
 # ---------------------------------------------------------------- one reducer
 
 #: Scalar metrics of `unit_metrics` (angles rad, counts pairs).
-UNIT_METRICS = ("lost_motion_max", "lost_motion_min", "lost_motion_mean", "rotation_error_p2p", "rotation_error_mean",
-                "loaded_pairs_smooth", "loaded_pairs_min", "loaded_pairs_mean", "not_converged")
+UNIT_METRICS = (
+    "lost_motion_max",
+    "lost_motion_min",
+    "lost_motion_mean",
+    "rotation_error_p2p",
+    "rotation_error_mean",
+    "loaded_pairs_smooth",
+    "loaded_pairs_min",
+    "loaded_pairs_mean",
+    "not_converged",
+)
 
 
 def _positions(drive: CycloidPin, positions: ArrayLike | None) -> Array:
@@ -166,11 +176,17 @@ def grid_metrics(drive: CycloidPin, err: CycloidErrors, positions) -> dict[str, 
     res = _sweep(drive, err, positions)
     te, lm = res.rotation_error, res.lost_motion
     exact = _counts(drive, res)
-    return {"lost_motion_max": jnp.max(lm), "lost_motion_min": jnp.min(lm), "lost_motion_mean": jnp.mean(lm),
-            "rotation_error_p2p": jnp.max(te) - jnp.min(te), "rotation_error_mean": jnp.mean(te),
-            "loaded_pairs_smooth": jnp.mean(_smooth_counts(drive, res)),
-            "loaded_pairs_min": jnp.min(exact), "loaded_pairs_mean": jnp.mean(exact),
-            "not_converged": jnp.sum(~res.converged).astype(float)}
+    return {
+        "lost_motion_max": jnp.max(lm),
+        "lost_motion_min": jnp.min(lm),
+        "lost_motion_mean": jnp.mean(lm),
+        "rotation_error_p2p": jnp.max(te) - jnp.min(te),
+        "rotation_error_mean": jnp.mean(te),
+        "loaded_pairs_smooth": jnp.mean(_smooth_counts(drive, res)),
+        "loaded_pairs_min": jnp.min(exact),
+        "loaded_pairs_mean": jnp.mean(exact),
+        "not_converged": jnp.sum(~res.converged).astype(float),
+    }
 
 
 @eqx.filter_jit
@@ -179,8 +195,9 @@ def grid_metrics_jit(drive: CycloidPin, err: CycloidErrors, positions) -> dict[s
     return grid_metrics(drive, err, positions)
 
 
-def unit_metrics(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] | None = None, *,
-                 positions: ArrayLike | None = None) -> dict[str, Array]:
+def unit_metrics(
+    drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] | None = None, *, positions: ArrayLike | None = None
+) -> dict[str, Array]:
     """Metrics of one reducer over a set of input positions (no normal clearances).
 
     **Arguments:**
@@ -223,9 +240,13 @@ def _grad_jit(drive, err, positions, metrics: tuple[AbstractMetric, ...]):
     return f(diff), jax.jacrev(f)(diff)
 
 
-def sensitivities(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] | None = None, *,
-                  metrics: Sequence[AbstractMetric | str] = ("lost_motion",),
-                  positions: ArrayLike | None = None) -> dict[str, Sensitivity]:
+def sensitivities(
+    drive: CycloidPin,
+    errors: CycloidErrors | Mapping[str, Any] | None = None,
+    *,
+    metrics: Sequence[AbstractMetric | str] = ("lost_motion",),
+    positions: ArrayLike | None = None,
+) -> dict[str, Sensitivity]:
     """Gradients of `metrics` (their smooth surrogates) with respect to every error and to the modification
     amounts, at the reducer `errors`.
 

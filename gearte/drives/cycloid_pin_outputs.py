@@ -37,20 +37,30 @@ if TYPE_CHECKING:
     from .cycloid_pin import CycloidPin
 
 #: Scalar outputs of one Monte Carlo sample (`SampleOutputs`), in order, before the per-pin blocks.
-SAMPLE_SCALARS = ("lost_motion_max", "lost_motion_min", "lost_motion_mean", "rotation_error_p2p", "rotation_error_mean",
-                  "loaded_pairs_min", "loaded_pairs_mean", "lost_motion", "rotation_error", "loaded_pairs", "contact_pin",
-                  "not_converged")
+SAMPLE_SCALARS = (
+    "lost_motion_max",
+    "lost_motion_min",
+    "lost_motion_mean",
+    "rotation_error_p2p",
+    "rotation_error_mean",
+    "loaded_pairs_min",
+    "loaded_pairs_mean",
+    "lost_motion",
+    "rotation_error",
+    "loaded_pairs",
+    "contact_pin",
+    "not_converged",
+)
 
 ASSUMPTIONS = {
     "frame": "converted mechanism (arm fixed); pins numbered 1…z_b counter-clockwise from the crank direction at "
-             "θ_T = 0; the input angle θ_T turns the pin wheel relative to the arm",
+    "θ_T = 0; the input angle θ_T turns the pin wheel relative to the arm",
     "driving_flank": "the tooth-space half whose contacts push the disc clockwise; a forward load holds the disc "
-                     "against the driving flanks",
+    "against the driving flanks",
     "rotation_error": "Δθ = θ_a − (z_b/z_a) θ_T of the contacting pair = output rotation error",
-    "lost_motion": "driving contact − reverse contact with the input held; the headline is its maximum over "
-                   "the revolution sweep",
+    "lost_motion": "driving contact − reverse contact with the input held; the headline is its maximum over the revolution sweep",
     "tangential_clearance": "from the contact of the pin's own flank (forward load for driving pins, reverse "
-                            "for reverse pins), as an angle of the output and × R′ on the pin circle",
+    "for reverse pins), as an angle of the output and × R′ on the pin circle",
     "normal_clearance": "min over the pin's flank of |pin centre − flank point| − r′, at that contacting configuration",
     "loaded_pairs": "driving-flank pins whose tangential clearance on the pin circle ≤ the deformation budget",
 }
@@ -113,10 +123,22 @@ def sample_vector(d: CycloidPin, err, res, analysis_angle, normal: bool) -> Floa
     at = _analyse(d, err, analysis_angle, normal)
     te, lm = res.rotation_error, res.lost_motion
     counts = loaded_pairs(res, budget_mm=budget).astype(float)
-    scalars = jnp.stack([jnp.max(lm), jnp.min(lm), jnp.mean(lm), jnp.max(te) - jnp.min(te), jnp.mean(te),
-                         jnp.min(counts), jnp.mean(counts), at.lost_motion, at.rotation_error,
-                         loaded_pairs(at, budget_mm=budget).astype(float), at.contact_pin.astype(float),
-                         (jnp.sum(~res.converged) + jnp.sum(~at.converged)).astype(float)])
+    scalars = jnp.stack(
+        [
+            jnp.max(lm),
+            jnp.min(lm),
+            jnp.mean(lm),
+            jnp.max(te) - jnp.min(te),
+            jnp.mean(te),
+            jnp.min(counts),
+            jnp.mean(counts),
+            at.lost_motion,
+            at.rotation_error,
+            loaded_pairs(at, budget_mm=budget).astype(float),
+            at.contact_pin.astype(float),
+            (jnp.sum(~res.converged) + jnp.sum(~at.converged)).astype(float),
+        ]
+    )
     arc = jnp.where(jnp.isfinite(at.tangential_arc), at.tangential_arc, jnp.nan)
     return jnp.concatenate([scalars, arc, at.normal_clearance])
 
@@ -127,8 +149,8 @@ def unpack(drive: CycloidPin, values) -> dict[str, np.ndarray]:
     k = len(SAMPLE_SCALARS)
     zb = drive.z_pins
     out = {name: v[..., i] for i, name in enumerate(SAMPLE_SCALARS)}
-    out["tangential_arc"] = v[..., k:k + zb]
-    out["normal_clearance"] = v[..., k + zb:k + 2 * zb]
+    out["tangential_arc"] = v[..., k : k + zb]
+    out["normal_clearance"] = v[..., k + zb : k + 2 * zb]
     return out
 
 
@@ -157,11 +179,21 @@ def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
     space = np.asarray(at.space)
     rot = np.asarray(at.rotation_to_contact)
     loaded_mask = drv & (arc <= budget * (1 + 1e-12) + 1e-12)
-    pairs = [{"pin": j + 1, "tooth_space": int(space[j]) + 1, "flank": "driving" if drv[j] else "reverse",
-              "on_driving_flank": bool(drv[j]), "can_touch": bool(np.isfinite(arc[j])),
-              "tangential_clearance_mm": _num(arc[j]), "tangential_clearance_arcsec": _num(tang[j] * ARCSEC_PER_RAD),
-              "normal_clearance_mm": float(normal[j]), "rotation_to_contact_arcsec": _num(rot[j] * ARCSEC_PER_RAD),
-              "loaded": bool(loaded_mask[j])} for j in range(zb)]
+    pairs = [
+        {
+            "pin": j + 1,
+            "tooth_space": int(space[j]) + 1,
+            "flank": "driving" if drv[j] else "reverse",
+            "on_driving_flank": bool(drv[j]),
+            "can_touch": bool(np.isfinite(arc[j])),
+            "tangential_clearance_mm": _num(arc[j]),
+            "tangential_clearance_arcsec": _num(tang[j] * ARCSEC_PER_RAD),
+            "normal_clearance_mm": float(normal[j]),
+            "rotation_to_contact_arcsec": _num(rot[j] * ARCSEC_PER_RAD),
+            "loaded": bool(loaded_mask[j]),
+        }
+        for j in range(zb)
+    ]
     n_loaded = int(loaded_pairs(at, budget_mm=budget))
     pitch_loaded = np.asarray(loaded_pairs(pitch, budget_mm=budget))
     rev_loaded = np.asarray(loaded_pairs(rev, budget_mm=budget))
@@ -188,19 +220,38 @@ def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
         "rotation_error_reverse_p2p_arcsec": float(te_r.max() - te_r.min()),
         "rotation_error_at_input_angle_arcsec": float(at.rotation_error) * ARCSEC_PER_RAD,
         "rotation_error_mean_arcsec": float(te_f.mean()),
-        "sweep": {"pitch_points": a.pitch_points, "revolution_points_per_pitch": a.sweep_points_per_pitch,
-                  "revolutions": a.sweep_revolutions, "all_solves_converged": conv},
+        "sweep": {
+            "pitch_points": a.pitch_points,
+            "revolution_points_per_pitch": a.sweep_points_per_pitch,
+            "revolutions": a.sweep_revolutions,
+            "all_solves_converged": conv,
+        },
         "clearance_assumptions": dict(ASSUMPTIONS),
     }
-    curves = {"at": at, "pitch": pitch, "rev": rev, "rev_angles": rev_angles, "te_f": te_f, "te_r": te_r, "lm": lm,
-              "arc": arc, "normal": normal, "drv": drv, "ci": ci, "ri": ri, "n_loaded": n_loaded}
+    curves = {
+        "at": at,
+        "pitch": pitch,
+        "rev": rev,
+        "rev_angles": rev_angles,
+        "te_f": te_f,
+        "te_r": te_r,
+        "lm": lm,
+        "arc": arc,
+        "normal": normal,
+        "drv": drv,
+        "ci": ci,
+        "ri": ri,
+        "n_loaded": n_loaded,
+    }
     return summary, curves
 
 
 #: The reference reducer's sensitivities: summary key → (metric, unit, factor per rad or per pair).
-SENSITIVITY_METRICS = {"lost_motion_max": (LostMotion(), "arcmin", ARCMIN_PER_RAD),
-                       "rotation_error_p2p": (RotationErrorPeakToPeak(), "arcsec", ARCSEC_PER_RAD),
-                       "loaded_pairs_smooth": (LoadedPairs(), "pairs", 1.0)}
+SENSITIVITY_METRICS = {
+    "lost_motion_max": (LostMotion(), "arcmin", ARCMIN_PER_RAD),
+    "rotation_error_p2p": (RotationErrorPeakToPeak(), "arcsec", ARCSEC_PER_RAD),
+    "loaded_pairs_smooth": (LoadedPairs(), "pairs", 1.0),
+}
 
 
 def reference_sensitivities(drive: CycloidPin) -> dict:
@@ -232,9 +283,15 @@ def _stats(v, unit: str) -> dict:
     v = np.asarray(v, dtype=np.float64).ravel()
     v = v[np.isfinite(v)]
     pct = np.percentile(v, (1.0, 5.0, 50.0, 95.0, 99.0, 99.73))
-    return {"unit": unit, "n": int(v.size), "min": float(v.min()), "max": float(v.max()), "mean": float(v.mean()),
-            "std": float(v.std(ddof=1)) if v.size > 1 else 0.0,
-            "percentiles": {f"{p:g}": float(x) for p, x in zip((1.0, 5.0, 50.0, 95.0, 99.0, 99.73), pct, strict=True)}}
+    return {
+        "unit": unit,
+        "n": int(v.size),
+        "min": float(v.min()),
+        "max": float(v.max()),
+        "mean": float(v.mean()),
+        "std": float(v.std(ddof=1)) if v.size > 1 else 0.0,
+        "percentiles": {f"{p:g}": float(x) for p, x in zip((1.0, 5.0, 50.0, 95.0, 99.0, 99.73), pct, strict=True)},
+    }
 
 
 def _zero_law(law) -> bool:
@@ -245,8 +302,7 @@ def _zero_law(law) -> bool:
 
 def tolerance_rows(model) -> dict[str, str]:
     """How each error source is drawn (value law), for reports; sources fixed at 0 are left out."""
-    return {name: src.magnitude.describe(model.specs[name].unit) for name, src in model.sources.items()
-            if not _zero_law(src.magnitude)}
+    return {name: src.magnitude.describe(model.specs[name].unit) for name, src in model.sources.items() if not _zero_law(src.magnitude)}
 
 
 def monte_carlo_summary(drive: CycloidPin, context: AbstractStudyContext, u: dict) -> dict:
@@ -261,27 +317,40 @@ def monte_carlo_summary(drive: CycloidPin, context: AbstractStudyContext, u: dic
         for j in range(zb):
             aj = arc[:, j]
             fin = np.isfinite(aj)
-            per_pin.append({"pin": j + 1, "can_touch_fraction": float(np.mean(fin)),
-                            "tangential_clearance_mm": {"mean": _num(np.nanmean(aj)) if fin.any() else None,
-                                                        "p5": _num(np.nanpercentile(aj, 5)) if fin.any() else None,
-                                                        "p95": _num(np.nanpercentile(aj, 95)) if fin.any() else None},
-                            "normal_clearance_mm": {"mean": _num(np.nanmean(nrm[:, j])), "p5": _num(np.nanpercentile(nrm[:, j], 5)),
-                                                    "p95": _num(np.nanpercentile(nrm[:, j], 95))}})
+            per_pin.append(
+                {
+                    "pin": j + 1,
+                    "can_touch_fraction": float(np.mean(fin)),
+                    "tangential_clearance_mm": {
+                        "mean": _num(np.nanmean(aj)) if fin.any() else None,
+                        "p5": _num(np.nanpercentile(aj, 5)) if fin.any() else None,
+                        "p95": _num(np.nanpercentile(aj, 95)) if fin.any() else None,
+                    },
+                    "normal_clearance_mm": {
+                        "mean": _num(np.nanmean(nrm[:, j])),
+                        "p5": _num(np.nanpercentile(nrm[:, j], 5)),
+                        "p95": _num(np.nanpercentile(nrm[:, j], 95)),
+                    },
+                }
+            )
     counts = np.bincount(u["loaded_pairs"].astype(int), minlength=zb // 2 + 1)
     ok = u["lost_motion_min"] >= 0
-    return {"samples": context.samples, "seed": context.seed,
-            "positions": {"count": int(drive.input_angles().size), "per_pitch": a.positions_per_pitch, "revolutions": a.revolutions},
-            "tolerances": tolerance_rows(context.model),
-            "lost_motion_max_arcmin": _stats(u["lost_motion_max"] * ARCMIN_PER_RAD, "arcmin"),
-            "lost_motion_min_arcmin": _stats(u["lost_motion_min"] * ARCMIN_PER_RAD, "arcmin"),
-            "rotation_error_p2p_arcsec": _stats(u["rotation_error_p2p"] * ARCSEC_PER_RAD, "arcsec"),
-            "loaded_pairs": _stats(u["loaded_pairs"], "pairs") | {"histogram": {str(i): int(c) for i, c in enumerate(counts) if c}},
-            "loaded_pairs_min_over_cycle": _stats(u["loaded_pairs_min"], "pairs"),
-            "interference_fraction": float(np.mean(u["lost_motion_min"] < 0)),
-            # For a reducer that interferes somewhere the rigid contacts are not those of the deformed reducer.
-            "loaded_pairs_without_interference": _stats(u["loaded_pairs"][ok], "pairs") if np.any(ok) else None,
-            "not_converged_solves": int(np.sum(u["not_converged"])),
-            "per_pin_at_input_angle": per_pin}
+    return {
+        "samples": context.samples,
+        "seed": context.seed,
+        "positions": {"count": int(drive.input_angles().size), "per_pitch": a.positions_per_pitch, "revolutions": a.revolutions},
+        "tolerances": tolerance_rows(context.model),
+        "lost_motion_max_arcmin": _stats(u["lost_motion_max"] * ARCMIN_PER_RAD, "arcmin"),
+        "lost_motion_min_arcmin": _stats(u["lost_motion_min"] * ARCMIN_PER_RAD, "arcmin"),
+        "rotation_error_p2p_arcsec": _stats(u["rotation_error_p2p"] * ARCSEC_PER_RAD, "arcsec"),
+        "loaded_pairs": _stats(u["loaded_pairs"], "pairs") | {"histogram": {str(i): int(c) for i, c in enumerate(counts) if c}},
+        "loaded_pairs_min_over_cycle": _stats(u["loaded_pairs_min"], "pairs"),
+        "interference_fraction": float(np.mean(u["lost_motion_min"] < 0)),
+        # For a reducer that interferes somewhere the rigid contacts are not those of the deformed reducer.
+        "loaded_pairs_without_interference": _stats(u["loaded_pairs"][ok], "pairs") if np.any(ok) else None,
+        "not_converged_solves": int(np.sum(u["not_converged"])),
+        "per_pin_at_input_angle": per_pin,
+    }
 
 
 # ---------------------------------------------------------------- everything together
@@ -305,108 +374,204 @@ def study_outputs(drive: CycloidPin, context: AbstractStudyContext) -> StudyOutp
     n_out = theoretical_pairs(drive)
     pitch, lm = c["pitch"], c["lm"]
     figures = [
-        Figure("clearance_per_pin.png", "gearte.drives.cycloid_pin_plots:clearance_per_pin",
-               dict(tangential_mm=c["arc"], normal_mm=c["normal"], on_driving=c["drv"], budget_mm=budget, contact_pin=c["ci"] + 1,
-                    reverse_contact_pin=c["ri"] + 1,
-                    title=f"reference reducer: clearances at θ_T = {math.degrees(theta0):.4g}°; "
-                          f"{c['n_loaded']} of {n_out} driving pairs within {budget:g} mm"),
-               "clearance of every pin at the input position"),
-        Figure("clearance_vs_input.png", "gearte.drives.cycloid_pin_plots:clearance_vs_input",
-               dict(input_deg=np.degrees(np.asarray(pitch.input_angle)), tangential_mm=np.asarray(pitch.tangential_arc),
-                    normal_mm=np.asarray(pitch.normal_clearance),
-                    pins=[j + 1 for j in range(zb) if bool(np.all(np.asarray(pitch.on_driving_flank)[:, j]))], budget_mm=budget,
-                    title="reference reducer: driving-flank pairs over one pin pitch (cf. Yao & Liang 2001, figures 3–8)"),
-               "clearance against the input angle"),
-        Figure("rotation_error.png", "gearte.drives.cycloid_pin_plots:rotation_error",
-               dict(input_rev=np.asarray(c["rev_angles"]) / (2 * math.pi), forward_arcsec=c["te_f"], reverse_arcsec=c["te_r"],
-                    title=f"reference reducer: rotation error over {drive.analysis.sweep_revolutions} input revolution(s), "
-                          f"lost motion {lm.min():.2f}′ … {lm.max():.2f}′"),
-               "rotation error"),
-        Figure("monte_carlo.png", "gearte.drives.cycloid_pin_plots:distributions",
-               dict(series=[("lost motion, max over the cycle (′)", u["lost_motion_max"] * ARCMIN_PER_RAD, "′"),
-                            ("rotation error p-p (″)", u["rotation_error_p2p"] * ARCSEC_PER_RAD, "″"),
-                            (f"loaded pairs at θ_T (of {n_out})", u["loaded_pairs"], "")],
-                    title=f"Monte Carlo of the clearances over {context.samples:,} reducers"),
-               "Monte Carlo"),
+        Figure(
+            "clearance_per_pin.png",
+            "gearte.drives.cycloid_pin_plots:clearance_per_pin",
+            dict(
+                tangential_mm=c["arc"],
+                normal_mm=c["normal"],
+                on_driving=c["drv"],
+                budget_mm=budget,
+                contact_pin=c["ci"] + 1,
+                reverse_contact_pin=c["ri"] + 1,
+                title=f"reference reducer: clearances at θ_T = {math.degrees(theta0):.4g}°; "
+                f"{c['n_loaded']} of {n_out} driving pairs within {budget:g} mm",
+            ),
+            "clearance of every pin at the input position",
+        ),
+        Figure(
+            "clearance_vs_input.png",
+            "gearte.drives.cycloid_pin_plots:clearance_vs_input",
+            dict(
+                input_deg=np.degrees(np.asarray(pitch.input_angle)),
+                tangential_mm=np.asarray(pitch.tangential_arc),
+                normal_mm=np.asarray(pitch.normal_clearance),
+                pins=[j + 1 for j in range(zb) if bool(np.all(np.asarray(pitch.on_driving_flank)[:, j]))],
+                budget_mm=budget,
+                title="reference reducer: driving-flank pairs over one pin pitch (cf. Yao & Liang 2001, figures 3–8)",
+            ),
+            "clearance against the input angle",
+        ),
+        Figure(
+            "rotation_error.png",
+            "gearte.drives.cycloid_pin_plots:rotation_error",
+            dict(
+                input_rev=np.asarray(c["rev_angles"]) / (2 * math.pi),
+                forward_arcsec=c["te_f"],
+                reverse_arcsec=c["te_r"],
+                title=f"reference reducer: rotation error over {drive.analysis.sweep_revolutions} input revolution(s), "
+                f"lost motion {lm.min():.2f}′ … {lm.max():.2f}′",
+            ),
+            "rotation error",
+        ),
+        Figure(
+            "monte_carlo.png",
+            "gearte.drives.cycloid_pin_plots:distributions",
+            dict(
+                series=[
+                    ("lost motion, max over the cycle (′)", u["lost_motion_max"] * ARCMIN_PER_RAD, "′"),
+                    ("rotation error p-p (″)", u["rotation_error_p2p"] * ARCSEC_PER_RAD, "″"),
+                    (f"loaded pairs at θ_T (of {n_out})", u["loaded_pairs"], ""),
+                ],
+                title=f"Monte Carlo of the clearances over {context.samples:,} reducers",
+            ),
+            "Monte Carlo",
+        ),
     ]
-    arrays = {"lost_motion_max_arcmin": u["lost_motion_max"] * ARCMIN_PER_RAD,
-              "lost_motion_min_arcmin": u["lost_motion_min"] * ARCMIN_PER_RAD,
-              "rotation_error_p2p_arcsec": u["rotation_error_p2p"] * ARCSEC_PER_RAD,
-              "loaded_pairs": u["loaded_pairs"], "loaded_pairs_min": u["loaded_pairs_min"],
-              "contact_pin": u["contact_pin"] + 1, "tangential_clearance_mm": u["tangential_arc"],
-              "normal_clearance_mm": u["normal_clearance"]}
+    arrays = {
+        "lost_motion_max_arcmin": u["lost_motion_max"] * ARCMIN_PER_RAD,
+        "lost_motion_min_arcmin": u["lost_motion_min"] * ARCMIN_PER_RAD,
+        "rotation_error_p2p_arcsec": u["rotation_error_p2p"] * ARCSEC_PER_RAD,
+        "loaded_pairs": u["loaded_pairs"],
+        "loaded_pairs_min": u["loaded_pairs_min"],
+        "contact_pin": u["contact_pin"] + 1,
+        "tangential_clearance_mm": u["tangential_arc"],
+        "normal_clearance_mm": u["normal_clearance"],
+    }
     # The reference reducer's curves.
-    curves = {"pitch_input_angle_rad": np.asarray(pitch.input_angle),
-              "pitch_tangential_clearance_mm": np.asarray(pitch.tangential_arc),
-              "pitch_normal_clearance_mm": np.asarray(pitch.normal_clearance),
-              "pitch_on_driving_flank": np.asarray(pitch.on_driving_flank),
-              "revolution_input_angle_rad": np.asarray(c["rev_angles"]),
-              "rotation_error_arcsec": c["te_f"], "reverse_rotation_error_arcsec": c["te_r"],
-              "lost_motion_arcmin": lm, "contact_pin": np.asarray(c["rev"].contact_pin) + 1}
+    curves = {
+        "pitch_input_angle_rad": np.asarray(pitch.input_angle),
+        "pitch_tangential_clearance_mm": np.asarray(pitch.tangential_arc),
+        "pitch_normal_clearance_mm": np.asarray(pitch.normal_clearance),
+        "pitch_on_driving_flank": np.asarray(pitch.on_driving_flank),
+        "revolution_input_angle_rad": np.asarray(c["rev_angles"]),
+        "rotation_error_arcsec": c["te_f"],
+        "reverse_rotation_error_arcsec": c["te_r"],
+        "lost_motion_arcmin": lm,
+        "contact_pin": np.asarray(c["rev"].contact_pin) + 1,
+    }
     return StudyOutputs(summary=summary, report=report(drive, summary), figures=figures, arrays=arrays, files={"curves.npz": curves})
 
 
 def report(drive: CycloidPin, s: dict) -> list[str]:
     """The report sections of the reference reducer and of the Monte Carlo (Markdown lines)."""
-    L = ["", "## Result for the reducer analysed", "",
-         f"At the input position θ_T = {s['input_angle_deg']:.4f}° (pin wheel relative to the arm):", "",
-         f"- contacting pair (forward load): pin {s['contact_pair']['pin']} with tooth space {s['contact_pair']['tooth_space']}; "
-         f"reverse load: pin {s['reverse_contact_pair']['pin']} with tooth space {s['reverse_contact_pair']['tooth_space']};",
-         f"- loaded pairs (tangential clearance ≤ {s['deformation_budget_mm']:g} mm on the pin circle): "
-         f"**{s['loaded_pairs']} of the {s['loaded_pairs_out_of']}** theoretical pairs "
-         f"(over one pitch {s['loaded_pairs_over_pitch']['min']}–{s['loaded_pairs_over_pitch']['max']}, over the revolution "
-         f"{s['loaded_pairs_over_revolution']['min']}–{s['loaded_pairs_over_revolution']['max']});",
-         f"- lost motion: **{s['lost_motion_arcmin']:.3f}′** at most over the revolution "
-         f"(range {s['lost_motion_range_arcmin'][0]:.3f}′ … {s['lost_motion_range_arcmin'][1]:.3f}′; "
-         f"{s['lost_motion_at_input_angle_arcmin']:.3f}′ at θ_T)"
-         + ("; **negative somewhere: the disc interferes (jams) there**" if s["interference"] else "") + ";",
-         f"- rotation error (TE) of the stage, forward load: peak-to-peak **{s['rotation_error_p2p_arcsec']:.2f}″** over "
-         f"{drive.analysis.sweep_revolutions} input revolution(s) (reverse load {s['rotation_error_reverse_p2p_arcsec']:.2f}″).", "",
-         "![clearance per pin](clearance_per_pin.png)", "",
-         "| pin | tooth space | flank | tangential clearance (mm) | tangential clearance (″) | normal clearance (mm) | within budget |",
-         "|---|---|---|---|---|---|---|"]
+    L = [
+        "",
+        "## Result for the reducer analysed",
+        "",
+        f"At the input position θ_T = {s['input_angle_deg']:.4f}° (pin wheel relative to the arm):",
+        "",
+        f"- contacting pair (forward load): pin {s['contact_pair']['pin']} with tooth space {s['contact_pair']['tooth_space']}; "
+        f"reverse load: pin {s['reverse_contact_pair']['pin']} with tooth space {s['reverse_contact_pair']['tooth_space']};",
+        f"- loaded pairs (tangential clearance ≤ {s['deformation_budget_mm']:g} mm on the pin circle): "
+        f"**{s['loaded_pairs']} of the {s['loaded_pairs_out_of']}** theoretical pairs "
+        f"(over one pitch {s['loaded_pairs_over_pitch']['min']}–{s['loaded_pairs_over_pitch']['max']}, over the revolution "
+        f"{s['loaded_pairs_over_revolution']['min']}–{s['loaded_pairs_over_revolution']['max']});",
+        f"- lost motion: **{s['lost_motion_arcmin']:.3f}′** at most over the revolution "
+        f"(range {s['lost_motion_range_arcmin'][0]:.3f}′ … {s['lost_motion_range_arcmin'][1]:.3f}′; "
+        f"{s['lost_motion_at_input_angle_arcmin']:.3f}′ at θ_T)"
+        + ("; **negative somewhere: the disc interferes (jams) there**" if s["interference"] else "")
+        + ";",
+        f"- rotation error (TE) of the stage, forward load: peak-to-peak **{s['rotation_error_p2p_arcsec']:.2f}″** over "
+        f"{drive.analysis.sweep_revolutions} input revolution(s) (reverse load {s['rotation_error_reverse_p2p_arcsec']:.2f}″).",
+        "",
+        "![clearance per pin](clearance_per_pin.png)",
+        "",
+        "| pin | tooth space | flank | tangential clearance (mm) | tangential clearance (″) | normal clearance (mm) | within budget |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for p in s["pairs"]:
-        L.append(f"| {p['pin']} | {p['tooth_space']} | {p['flank']} | "
-                 f"{_fmt(p['tangential_clearance_mm'], '.4f') if p['can_touch'] else 'never touches'} | "
-                 f"{_fmt(p['tangential_clearance_arcsec'], '.1f')} | {p['normal_clearance_mm']:.4f} | {'yes' if p['loaded'] else ''} |")
-    L += ["", "![clearance against the input angle](clearance_vs_input.png)", "", "![rotation error](rotation_error.png)", "",
-          "## Errors of the reducer analysed", "", "| field | value |", "|---|---|"]
+        L.append(
+            f"| {p['pin']} | {p['tooth_space']} | {p['flank']} | "
+            f"{_fmt(p['tangential_clearance_mm'], '.4f') if p['can_touch'] else 'never touches'} | "
+            f"{_fmt(p['tangential_clearance_arcsec'], '.1f')} | {p['normal_clearance_mm']:.4f} | {'yes' if p['loaded'] else ''} |"
+        )
+    L += [
+        "",
+        "![clearance against the input angle](clearance_vs_input.png)",
+        "",
+        "![rotation error](rotation_error.png)",
+        "",
+        "## Errors of the reducer analysed",
+        "",
+        "| field | value |",
+        "|---|---|",
+    ]
     L += [f"| {k} | {v} |" for k, v in s["reference_errors"].items()] or ["| (none) | |"]
-    L += ["", "## Sensitivities of the reducer analysed", "",
-          "Derivatives at the errors above (per-space and per-pin errors: the same change on all of them); "
-          "lost motion = its maximum over the revolution, loaded pairs = the smooth surrogate (mean over positions).", "",
-          "| quantity | d lost motion (′ per) | d TE p-p (″ per) | d loaded pairs (per) |", "|---|---|---|---|"]
+    L += [
+        "",
+        "## Sensitivities of the reducer analysed",
+        "",
+        "Derivatives at the errors above (per-space and per-pin errors: the same change on all of them); "
+        "lost motion = its maximum over the revolution, loaded pairs = the smooth surrogate (mean over positions).",
+        "",
+        "| quantity | d lost motion (′ per) | d TE p-p (″ per) | d loaded pairs (per) |",
+        "|---|---|---|---|",
+    ]
     sens = s["sensitivities"]
     for key in sens["lost_motion_max"]["derivatives"]:
         a, b, c = (sens[m]["derivatives"][key] for m in ("lost_motion_max", "rotation_error_p2p", "loaded_pairs_smooth"))
         L.append(f"| {key} (per {a['per']}) | {a['value']:.4g} | {b['value']:.4g} | {c['value']:.4g} |")
     mc = s["monte_carlo"]
-    L += ["", "## Monte Carlo of the clearances over the error laws", "",
-          f"{mc['samples']:,} reducers, seed {mc['seed']}; the cycle: {mc['positions']['count']} input positions "
-          f"({mc['positions']['per_pitch']} per pin pitch over {mc['positions']['revolutions']} revolution(s)).", "",
-          "| error | law |", "|---|---|"]
+    L += [
+        "",
+        "## Monte Carlo of the clearances over the error laws",
+        "",
+        f"{mc['samples']:,} reducers, seed {mc['seed']}; the cycle: {mc['positions']['count']} input positions "
+        f"({mc['positions']['per_pitch']} per pin pitch over {mc['positions']['revolutions']} revolution(s)).",
+        "",
+        "| error | law |",
+        "|---|---|",
+    ]
     L += [f"| {k} | {v} |" for k, v in mc["tolerances"].items()]
     L += ["", "| quantity | mean | std | P5 | P50 | P95 | max |", "|---|---|---|---|---|---|---|"]
-    for label, key in (("lost motion, max over the cycle (′)", "lost_motion_max_arcmin"),
-                       ("lost motion, min over the cycle (′)", "lost_motion_min_arcmin"),
-                       ("rotation error p-p (″)", "rotation_error_p2p_arcsec"),
-                       (f"loaded pairs at θ_T (of {s['loaded_pairs_out_of']})", "loaded_pairs"),
-                       ("loaded pairs, min over the cycle", "loaded_pairs_min_over_cycle")):
+    for label, key in (
+        ("lost motion, max over the cycle (′)", "lost_motion_max_arcmin"),
+        ("lost motion, min over the cycle (′)", "lost_motion_min_arcmin"),
+        ("rotation error p-p (″)", "rotation_error_p2p_arcsec"),
+        (f"loaded pairs at θ_T (of {s['loaded_pairs_out_of']})", "loaded_pairs"),
+        ("loaded pairs, min over the cycle", "loaded_pairs_min_over_cycle"),
+    ):
         q = mc[key]
-        L.append(f"| {label} | {q['mean']:.3f} | {q['std']:.3f} | {q['percentiles']['5']:.3f} | {q['percentiles']['50']:.3f} | "
-                 f"{q['percentiles']['95']:.3f} | {q['max']:.3f} |")
-    L += ["", f"Reducers that interfere somewhere in the cycle (lost motion < 0): {100 * mc['interference_fraction']:.2f} %"
-          + (f"; the others have {mc['loaded_pairs_without_interference']['mean']:.2f} loaded pairs at θ_T on average."
-             if mc["loaded_pairs_without_interference"] and mc["interference_fraction"] > 0 else "."), "",
-          "![Monte Carlo](monte_carlo.png)", "", "## The clearance analysis: assumptions", ""]
+        L.append(
+            f"| {label} | {q['mean']:.3f} | {q['std']:.3f} | {q['percentiles']['5']:.3f} | {q['percentiles']['50']:.3f} | "
+            f"{q['percentiles']['95']:.3f} | {q['max']:.3f} |"
+        )
+    L += [
+        "",
+        f"Reducers that interfere somewhere in the cycle (lost motion < 0): {100 * mc['interference_fraction']:.2f} %"
+        + (
+            f"; the others have {mc['loaded_pairs_without_interference']['mean']:.2f} loaded pairs at θ_T on average."
+            if mc["loaded_pairs_without_interference"] and mc["interference_fraction"] > 0
+            else "."
+        ),
+        "",
+        "![Monte Carlo](monte_carlo.png)",
+        "",
+        "## The clearance analysis: assumptions",
+        "",
+    ]
     L += [f"- {k.replace('_', ' ')}: {v}." for k, v in s["clearance_assumptions"].items()]
-    L += [f"- All solves converged: {'yes' if s['sweep']['all_solves_converged'] else 'NO (see summary.json)'}"
-          + (f"; Monte Carlo: {mc['not_converged_solves']} solves did not converge." if mc["not_converged_solves"] else "."), "",
-          "Files: `clearance_per_pin.png`, `clearance_vs_input.png`, `rotation_error.png`, `monte_carlo.png`: the plots above; "
-          "`samples.npz` also holds the per-reducer clearances (`lost_motion_max_arcmin`, `loaded_pairs`, "
-          "`tangential_clearance_mm`, …) and the reference reducer's curves (`reference_*`).", ""]
+    L += [
+        f"- All solves converged: {'yes' if s['sweep']['all_solves_converged'] else 'NO (see summary.json)'}"
+        + (f"; Monte Carlo: {mc['not_converged_solves']} solves did not converge." if mc["not_converged_solves"] else "."),
+        "",
+        "Files: `clearance_per_pin.png`, `clearance_vs_input.png`, `rotation_error.png`, `monte_carlo.png`: the plots above; "
+        "`samples.npz` also holds the per-reducer clearances (`lost_motion_max_arcmin`, `loaded_pairs`, "
+        "`tangential_clearance_mm`, …) and the reference reducer's curves (`reference_*`).",
+        "",
+    ]
     return L
 
 
-__all__ = ("SAMPLE_SCALARS", "SampleOutputs", "monte_carlo_summary", "reference_sensitivities", "reference_summary", "report",
-           "sample_outputs", "study_outputs", "tolerance_rows")
+__all__ = (
+    "SAMPLE_SCALARS",
+    "SampleOutputs",
+    "monte_carlo_summary",
+    "reference_sensitivities",
+    "reference_summary",
+    "report",
+    "sample_outputs",
+    "study_outputs",
+    "tolerance_rows",
+)

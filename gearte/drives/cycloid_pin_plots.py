@@ -10,8 +10,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 
-def clearance_per_pin(tangential_mm, normal_mm, on_driving, *, budget_mm: float, contact_pin: int,
-                              reverse_contact_pin: int, title: str, path):
+def clearance_per_pin(
+    tangential_mm, normal_mm, on_driving, *, budget_mm: float, contact_pin: int, reverse_contact_pin: int, title: str, path
+):
     """Tangential (arc on the pin circle) and normal clearance of every pin at one input position.
 
     Pins numbered 1 … z_b; driving-flank pins blue, reverse-flank pins orange; pins that can never
@@ -35,10 +36,24 @@ def clearance_per_pin(tangential_mm, normal_mm, on_driving, *, budget_mm: float,
     ax.plot([], [], "s", color="#4477aa", label="driving flank")
     ax.plot([], [], "s", color="#ee7733", label="reverse flank")
     ax.plot([], [], "x", color="#555555", label="never touches (beyond the tooth tip)")
-    ax.annotate("contact", (contact_pin, 0), textcoords="offset points", xytext=(0, 12), ha="center", fontsize=8,
-                arrowprops=dict(arrowstyle="->", color="#222222"))
-    ax.annotate("reverse\ncontact", (reverse_contact_pin, 0), textcoords="offset points", xytext=(0, 12), ha="center",
-                fontsize=8, arrowprops=dict(arrowstyle="->", color="#222222"))
+    ax.annotate(
+        "contact",
+        (contact_pin, 0),
+        textcoords="offset points",
+        xytext=(0, 12),
+        ha="center",
+        fontsize=8,
+        arrowprops=dict(arrowstyle="->", color="#222222"),
+    )
+    ax.annotate(
+        "reverse\ncontact",
+        (reverse_contact_pin, 0),
+        textcoords="offset points",
+        xytext=(0, 12),
+        ha="center",
+        fontsize=8,
+        arrowprops=dict(arrowstyle="->", color="#222222"),
+    )
     ax.set_ylim(0, top * 3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.set_title(title, fontsize=9)
@@ -50,6 +65,7 @@ def clearance_per_pin(tangential_mm, normal_mm, on_driving, *, budget_mm: float,
     ax.set_xticks(pins)
     fig.tight_layout()
     fig.savefig(path)
+
 
 def clearance_vs_input(input_deg, tangential_mm, normal_mm, pins, *, budget_mm: float, title: str, path):
     """Clearance of each pin in `pins` (1-based) against the input angle over one pin pitch (the paper's figures 3–8).
@@ -81,6 +97,7 @@ def clearance_vs_input(input_deg, tangential_mm, normal_mm, pins, *, budget_mm: 
     fig.tight_layout()
     fig.savefig(path)
 
+
 def rotation_error(input_rev, forward_arcsec, reverse_arcsec, *, title: str, path):
     """Rotation error of the stage under a forward and a reverse load against the input angle (top,
     each about its mean), and the lost motion between them (bottom; negative: interference)."""
@@ -91,10 +108,8 @@ def rotation_error(input_rev, forward_arcsec, reverse_arcsec, *, title: str, pat
     fig = Figure(figsize=(10, 6.4), dpi=110)
     axes = fig.subplots(2, 1, sharex=True)
     ax = axes[0]
-    ax.plot(x, f - f.mean(), color="#4477aa", linewidth=1.0,
-            label=f"forward load: mean {f.mean():.1f}″, p-p {f.max() - f.min():.1f}″")
-    ax.plot(x, r - r.mean(), color="#ee7733", linewidth=1.0,
-            label=f"reverse load: mean {r.mean():.1f}″, p-p {r.max() - r.min():.1f}″")
+    ax.plot(x, f - f.mean(), color="#4477aa", linewidth=1.0, label=f"forward load: mean {f.mean():.1f}″, p-p {f.max() - f.min():.1f}″")
+    ax.plot(x, r - r.mean(), color="#ee7733", linewidth=1.0, label=f"reverse load: mean {r.mean():.1f}″, p-p {r.max() - r.min():.1f}″")
     ax.axhline(0.0, color="#999999", linewidth=0.5)
     ax.set_ylabel("rotation error − its mean (″)")
     ax.legend(fontsize=8, loc="best")
@@ -111,6 +126,7 @@ def rotation_error(input_rev, forward_arcsec, reverse_arcsec, *, title: str, pat
     fig.tight_layout()
     fig.savefig(path)
 
+
 def distributions(series, *, title: str, path, bins: int = 60):
     """Monte Carlo histograms side by side; `series` = [(label, values, unit symbol)]."""
     n = len(series)
@@ -125,8 +141,16 @@ def distributions(series, *, title: str, path, bins: int = 60):
             edges = bins
         ax.hist(v, bins=edges, color="#4477aa", alpha=0.85)
         if v.size:
-            ax.text(0.98, 0.95, f"mean {np.mean(v):.2f}{sym}\nP5 {np.percentile(v, 5):.2f}{sym}\nP95 {np.percentile(v, 95):.2f}{sym}",
-                    transform=ax.transAxes, ha="right", va="top", fontsize=8, family="monospace")
+            ax.text(
+                0.98,
+                0.95,
+                f"mean {np.mean(v):.2f}{sym}\nP5 {np.percentile(v, 5):.2f}{sym}\nP95 {np.percentile(v, 95):.2f}{sym}",
+                transform=ax.transAxes,
+                ha="right",
+                va="top",
+                fontsize=8,
+                family="monospace",
+            )
         ax.set_xlabel(label)
         ax.set_ylabel("reducers")
     fig.suptitle(title, fontsize=10)

@@ -58,8 +58,9 @@ def drive_arguments(t: Table) -> dict[str, Any]:
     if t.has("eccentricity_mm") and t.has("K1"):
         a, K = t.number("eccentricity_mm", positive=True), t.number("K1", positive=True)
         if abs(K - a * zb / R) > 1e-9 * max(1.0, K):
-            raise ConfigError(f"{t.where} K1: {K:g} disagrees with eccentricity_mm × z_pins / pin_circle_radius_mm = "
-                              f"{a * zb / R:.9g}; give one of them")
+            raise ConfigError(
+                f"{t.where} K1: {K:g} disagrees with eccentricity_mm × z_pins / pin_circle_radius_mm = {a * zb / R:.9g}; give one of them"
+            )
         K = None
     else:
         a = t.number("eccentricity_mm", positive=True) if t.has("eccentricity_mm") else None
@@ -78,8 +79,9 @@ def drive_arguments(t: Table) -> dict[str, Any]:
         kw["modification"] = CycloidModification(RZ - R, rZ - r, rot)
     elif t.has("modification"):
         m = t.table("modification")
-        kw["modification"] = CycloidModification(m.number("shift_mm", 0.0), m.number("equidistant_mm", 0.0),
-                                                 m.number("rotation_arcsec", 0.0) / ARCSEC_PER_RAD)
+        kw["modification"] = CycloidModification(
+            m.number("shift_mm", 0.0), m.number("equidistant_mm", 0.0), m.number("rotation_arcsec", 0.0) / ARCSEC_PER_RAD
+        )
         m.finish()
     kw["analysis"] = _analysis(t, zb)
     counts = {"space": (zl if zl is not None else zb - 1), "pin": zb}
@@ -97,16 +99,27 @@ def _analysis(t: Table, z_pins: int) -> dict[str, Any]:
     sweep_ppp = an.integer("revolution_points_per_pitch", 16, minimum=1)
     revs = an.integer("revolutions", 1, minimum=1)
     if revs > z_pins - 1:
-        raise ConfigError(f"{an.where} revolutions: the pairing of pins and tooth spaces repeats after z_a = {z_pins - 1} "
-                          f"input revolutions; give at most {z_pins - 1}, got {revs}")
+        raise ConfigError(
+            f"{an.where} revolutions: the pairing of pins and tooth spaces repeats after z_a = {z_pins - 1} "
+            f"input revolutions; give at most {z_pins - 1}, got {revs}"
+        )
     normal = an.boolean("monte_carlo_normal", True)
     an.finish()
     g = _sub(t, "grid")
     ppp = g.integer("positions_per_pitch", 2, minimum=1)
     grid_revs = g.integer("revolutions", 1, minimum=1)
     g.finish()
-    return dict(budget_mm=budget, width_mm=width, positions_per_pitch=ppp, revolutions=grid_revs, input_angle=angle,
-                pitch_points=pitch_points, sweep_points_per_pitch=sweep_ppp, sweep_revolutions=revs, normal=normal)
+    return dict(
+        budget_mm=budget,
+        width_mm=width,
+        positions_per_pitch=ppp,
+        revolutions=grid_revs,
+        input_angle=angle,
+        pitch_points=pitch_points,
+        sweep_points_per_pitch=sweep_ppp,
+        sweep_revolutions=revs,
+        normal=normal,
+    )
 
 
 def _field_key(t: Table, field: str) -> str | None:
@@ -147,13 +160,17 @@ def reference_errors(t: Table, counts: dict[str, int]) -> tuple[dict[str, Any], 
             if count is None:
                 raise ConfigError(f"{t.where} {key}: a single value is expected here, got a list")
             if len(v) != count or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v):
-                raise ConfigError(f"{t.where} {key}: give {count} finite numbers (one per {'tooth space' if field in PER_SPACE else 'pin'}), "
-                                  f"got {len(v)} values")
+                raise ConfigError(
+                    f"{t.where} {key}: give {count} finite numbers (one per {'tooth space' if field in PER_SPACE else 'pin'}), "
+                    f"got {len(v)} values"
+                )
             values[field] = np.asarray(v, dtype=float) * scale
             given[key] = list(map(float, v))
         elif isinstance(v, dict):
             if count is None:
-                raise ConfigError(f"{t.where} {key}: a pattern table is only for per-space or per-pin errors ({', '.join(PER_SPACE + PER_PIN)})")
+                raise ConfigError(
+                    f"{t.where} {key}: a pattern table is only for per-space or per-pin errors ({', '.join(PER_SPACE + PER_PIN)})"
+                )
             pt = Table(v, f"{t.where} {key}")
             amp = pt.number(f"amplitude_{unit}")
             phase = math.radians(pt.number("phase_deg", 0.0))

@@ -94,8 +94,15 @@ class ExplicitDrive(AbstractSinusoidalDrive):
             if isinstance(freq, bool) or not isinstance(freq, (int, float, str)):
                 raise ConfigError(f"{tt.where} frequency: expected a number or a fraction string like '7/24'")
             try:
-                terms.append(ExplicitTerm(tt.string("source"), freq, phase_sign=tt.integer("phase_sign", 1),
-                                          offset=tt.angle("offset", 0.0), scale=tt.number("scale", 1.0)))
+                terms.append(
+                    ExplicitTerm(
+                        tt.string("source"),
+                        freq,
+                        phase_sign=tt.integer("phase_sign", 1),
+                        offset=tt.angle("offset", 0.0),
+                        scale=tt.number("scale", 1.0),
+                    )
+                )
             except ValueError as e:
                 raise ConfigError(f"{tt.where}: {e}") from None
             tt.finish()

@@ -189,14 +189,20 @@ class HarmonicDrive(AbstractSinusoidalDrive):
         z2 = whole("z_circular_spline", z_circular_spline, minimum=3)
         w = whole("waves", waves, minimum=1)
         if w != 2:
-            raise ValueError(f"waves: only double-wave drives (waves = 2) are modelled — Liu's eq. (2) doubles the "
-                             f"eccentricity angle because the two mesh zones are half a turn apart; got waves = {w}")
+            raise ValueError(
+                f"waves: only double-wave drives (waves = 2) are modelled — Liu's eq. (2) doubles the "
+                f"eccentricity angle because the two mesh zones are half a turn apart; got waves = {w}"
+            )
         if z2 <= z1:
-            raise ValueError(f"tooth counts: the circular spline needs more teeth than the flexspline (z_circular_spline > "
-                             f"z_flexspline) for a WG-in, CS-fixed, FS-out drive; got z_flexspline = {z1}, z_circular_spline = {z2}")
+            raise ValueError(
+                f"tooth counts: the circular spline needs more teeth than the flexspline (z_circular_spline > "
+                f"z_flexspline) for a WG-in, CS-fixed, FS-out drive; got z_flexspline = {z1}, z_circular_spline = {z2}"
+            )
         if (z2 - z1) % w:
-            raise ValueError(f"tooth counts: z_circular_spline − z_flexspline = {z2 - z1} must be a multiple of the wave "
-                             f"number {w} (usually exactly {w})")
+            raise ValueError(
+                f"tooth counts: z_circular_spline − z_flexspline = {z2 - z1} must be a multiple of the wave "
+                f"number {w} (usually exactly {w})"
+            )
         d = finite("pitch_diameter (mm)", pitch_diameter, positive=True)
         a = finite("pressure_angle (rad)", pressure_angle, positive=True)
         if not a < math.radians(45):
@@ -234,9 +240,16 @@ class HarmonicDrive(AbstractSinusoidalDrive):
 
     @property
     def error_sources(self) -> dict[str, SourceSpec]:
-        return {s.name: SourceSpec(s.name, "eccentricity", shape=(1,), tolerance=s.tolerance,
-                                   description=f"{CLASSES[s.source_class]['title']}, {s.kind.replace('_', ' ')}")
-                for s in self.sources}
+        return {
+            s.name: SourceSpec(
+                s.name,
+                "eccentricity",
+                shape=(1,),
+                tolerance=s.tolerance,
+                description=f"{CLASSES[s.source_class]['title']}, {s.kind.replace('_', ' ')}",
+            )
+            for s in self.sources
+        }
 
     @property
     def metrics(self) -> dict[str, AbstractMetric]:
@@ -284,8 +297,7 @@ class HarmonicDrive(AbstractSinusoidalDrive):
         n_mesh = t.number("teeth_in_mesh", positive=True) if t.has("teeth_in_mesh") else None
         raw = t.get("sources")
         if not isinstance(raw, list) or not raw:
-            raise ConfigError(f"{t.where} sources: give the error sources as [[drive.sources]] tables "
-                              "(name, class, kind, tolerance_um)")
+            raise ConfigError(f"{t.where} sources: give the error sources as [[drive.sources]] tables (name, class, kind, tolerance_um)")
         sources = []
         for i, item in enumerate(raw):
             st = Table(item, f"[[drive.sources]] #{i + 1}")
@@ -301,8 +313,9 @@ class HarmonicDrive(AbstractSinusoidalDrive):
                 raise ConfigError(f"{st.where}: {e}") from None
         settings = _run_settings(t)
         try:
-            return cls(z1, z2, sources, pitch_diameter=d, pressure_angle=alpha, k_b=kb, teeth_in_mesh=n_mesh,
-                       waves=waves, run_settings=settings)
+            return cls(
+                z1, z2, sources, pitch_diameter=d, pressure_angle=alpha, k_b=kb, teeth_in_mesh=n_mesh, waves=waves, run_settings=settings
+            )
         except ValueError as e:
             raise ConfigError(f"{t.where}: {e}") from None
 
@@ -386,10 +399,12 @@ class HarmonicDrive(AbstractSinusoidalDrive):
         return {"te_at_zero": evaluate(response, jnp.zeros(())), "max_gap": e.max_gap, "min_gap": e.min_gap}
 
     def accuracy(self) -> str:
-        return ("exact over the whole hyper-period: two-scale extrema (gearte.extrema_two_scale) — the tooth class "
-                "(2z₂ × input speed) as a fast line on the exact extrema of the other classes (a grid of 16 points per "
-                "period of their fastest term, Newton refinement), with a certified bound on the error of every value; "
-                "tested equal to the full-grid extrema to ~1e-12")
+        return (
+            "exact over the whole hyper-period: two-scale extrema (gearte.extrema_two_scale) — the tooth class "
+            "(2z₂ × input speed) as a fast line on the exact extrema of the other classes (a grid of 16 points per "
+            "period of their fastest term, Newton refinement), with a certified bound on the error of every value; "
+            "tested equal to the full-grid extrema to ~1e-12"
+        )
 
     def bytes_per_sample(self) -> int:
         """Peak working memory of one Monte Carlo sample: the grid of the slow classes (16 points per period), not of the tooth line."""
@@ -404,10 +419,14 @@ class HarmonicDrive(AbstractSinusoidalDrive):
         h = hyper_period_revs(self)
         i = self.ratio
         if h <= i:
-            return (f"the TE repeats every {h} input revolutions, which one output revolution ({i} input revolutions) "
-                    "covers, so the peak-to-peak over any output revolution equals that over the hyper-period")
-        return (f"the TE repeats only every {h} input revolutions = {h / i} output revolutions: the figures are over that "
-                "hyper-period, an upper bound of those of any single output revolution")
+            return (
+                f"the TE repeats every {h} input revolutions, which one output revolution ({i} input revolutions) "
+                "covers, so the peak-to-peak over any output revolution equals that over the hyper-period"
+            )
+        return (
+            f"the TE repeats only every {h} input revolutions = {h / i} output revolutions: the figures are over that "
+            "hyper-period, an upper bound of those of any single output revolution"
+        )
 
     # ------------------------------------------------------------ reports
 
@@ -425,8 +444,10 @@ class HarmonicDrive(AbstractSinusoidalDrive):
             ("beats per output revolution (CS and FS classes)", str(self.beats_per_output_rev)),
         ]
         rows += [(f"frequency of the {CLASSES[c]['title']} (× input speed)", f"{v} = {float(v):.6g}") for c, v in f.items()]
-        rows += [(f"source {s.name}", f"{CLASSES[s.source_class]['short']} class, {s.kind}, tolerance {float(s.tolerance):g} µm")
-                 for s in self.sources]
+        rows += [
+            (f"source {s.name}", f"{CLASSES[s.source_class]['short']} class, {s.kind}, tolerance {float(s.tolerance):g} µm")
+            for s in self.sources
+        ]
         return rows
 
     def study_outputs(self, context: AbstractStudyContext) -> StudyOutputs:
@@ -456,16 +477,19 @@ def _run_settings(t: Table) -> HarmonicRunSettings | None:
     if asm is not None:
         adj = asm.get("adjustable")
         if not isinstance(adj, list) or not all(isinstance(x, str) for x in adj) or not adj:
-            raise ConfigError(f"{asm.where} adjustable: expected a list of source names, e.g. [\"cs_bore_runout\"]")
+            raise ConfigError(f'{asm.where} adjustable: expected a list of source names, e.g. ["cs_bore_runout"]')
         adjustable = tuple(adj)
         starts = asm.integer("starts", 32, minimum=1)
         asm.finish()
     try:
-        settings = HarmonicRunSettings(input_rpm=rec.number("input_rpm", positive=True),
-                                       duration_s=rec.number("duration_s", positive=True),
-                                       sample_rate_hz=rec.number("sample_rate_hz", positive=True),
-                                       lines=rec.integer("lines", 8, minimum=1), adjustable=adjustable,
-                                       assembly_starts=starts)
+        settings = HarmonicRunSettings(
+            input_rpm=rec.number("input_rpm", positive=True),
+            duration_s=rec.number("duration_s", positive=True),
+            sample_rate_hz=rec.number("sample_rate_hz", positive=True),
+            lines=rec.integer("lines", 8, minimum=1),
+            adjustable=adjustable,
+            assembly_starts=starts,
+        )
     except ValueError as e:
         if isinstance(e, ConfigError):
             raise

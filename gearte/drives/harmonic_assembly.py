@@ -133,8 +133,14 @@ def optimise_assembly(
     base = drive.checked(errors)
     comp0 = drive.components(base)
     keep = [i for i, s in enumerate(drive.sources) if s.source_class != "tooth"]
-    sig0 = to_signal(Components(comp0.amplitude[jnp.asarray(keep)], comp0.phase[jnp.asarray(keep)],
-                                [comp0.freq[i] for i in keep], gain=comp0.gain[jnp.asarray(keep)]))
+    sig0 = to_signal(
+        Components(
+            comp0.amplitude[jnp.asarray(keep)],
+            comp0.phase[jnp.asarray(keep)],
+            [comp0.freq[i] for i in keep],
+            gain=comp0.gain[jnp.asarray(keep)],
+        )
+    )
     m = grid_size(sig0.orders, 16)
     cos_b, sin_b = _basis(sig0.orders, m)
     scale = float(jnp.sum(comp0.amplitude * comp0.gain)) or 1.0
@@ -150,8 +156,14 @@ def optimise_assembly(
     def smooth_p2p(y, args):
         del args
         comp = drive.components(errors_for(y))
-        sig = to_signal(Components(comp.amplitude[jnp.asarray(keep)], comp.phase[jnp.asarray(keep)],
-                                   [comp.freq[i] for i in keep], gain=comp.gain[jnp.asarray(keep)]))
+        sig = to_signal(
+            Components(
+                comp.amplitude[jnp.asarray(keep)],
+                comp.phase[jnp.asarray(keep)],
+                [comp.freq[i] for i in keep],
+                gain=comp.gain[jnp.asarray(keep)],
+            )
+        )
         f = _grid_values(sig, cos_b, sin_b) / width
         return width * (jax.nn.logsumexp(f) + jax.nn.logsumexp(-f))
 
@@ -168,6 +180,7 @@ def optimise_assembly(
         def one(y):
             sol = optx.minimise(smooth_p2p, solver, y, max_steps=max_steps, throw=False)
             return sol.value, sol.result
+
         ys, results = jax.vmap(one)(y0s)
         return ys, results, jax.vmap(exact_p2p)(ys), jax.vmap(exact_p2p)(y0s[:1])
 
@@ -191,8 +204,15 @@ def optimise_assembly(
         adj = [amp[i] for i, s in enumerate(drive.sources) if s.source_class == c and i in adj_idx]
         least[c] = _least_resultant(fixed, adj)
     check(result, throw=throw and not bool(result == RESULTS.some_starts_failed), what="optimise_assembly")
-    return AssemblyResult(errors=final, turns=turns, before=before, after=after,
-                          class_before={c: abs(v) for c, v in class_phasors(drive, base).items()},
-                          class_after={c: abs(v) for c, v in class_phasors(drive, final).items()},
-                          class_least=least, result=result, starts=int(y0.shape[0]), converged=converged)
-
+    return AssemblyResult(
+        errors=final,
+        turns=turns,
+        before=before,
+        after=after,
+        class_before={c: abs(v) for c, v in class_phasors(drive, base).items()},
+        class_after={c: abs(v) for c, v in class_phasors(drive, final).items()},
+        class_least=least,
+        result=result,
+        starts=int(y0.shape[0]),
+        converged=converged,
+    )

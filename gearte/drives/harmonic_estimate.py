@@ -78,8 +78,14 @@ def statistical_estimate(drive: HarmonicDrive, *, tolerances_um: Mapping[str, fl
         by_class[s.source_class] += t2
     delta = 0.5 * math.sqrt(sum(terms.values()))
     arcsec = delta * float(drive.gain()) * ARCSEC_PER_RAD
-    return Estimate(delta_um=delta, arcsec=arcsec, arcmin=arcsec / 60.0, sigma_arcsec=arcsec / 3.0,
-                    by_class_um={c: 0.5 * math.sqrt(v) for c, v in by_class.items()}, terms_um2=terms)
+    return Estimate(
+        delta_um=delta,
+        arcsec=arcsec,
+        arcmin=arcsec / 60.0,
+        sigma_arcsec=arcsec / 3.0,
+        by_class_um={c: 0.5 * math.sqrt(v) for c, v in by_class.items()},
+        terms_um2=terms,
+    )
 
 
 # ---------------------------------------------------------------- one unit: class lines and beats
@@ -164,9 +170,13 @@ def labelled_lines(drive: HarmonicDrive, rec: Record, *, count: int = 8, signal:
     out = []
     for f, a in zip(found.freq_cpm, found.amplitude):
         cls = label_for_frequency(drive, float(f), input_rpm=rec.input_rpm, tolerance_cpm=0.5 * res)
-        entry = {"freq_cpm": float(f), "amplitude_arcsec": float(a) * ARCSEC_PER_RAD,
-                 "source": class_label(cls) if cls else "unassigned line (no source class at this frequency)",
-                 "class": cls, "kind": "line"}
+        entry = {
+            "freq_cpm": float(f),
+            "amplitude_arcsec": float(a) * ARCSEC_PER_RAD,
+            "source": class_label(cls) if cls else "unassigned line (no source class at this frequency)",
+            "class": cls,
+            "kind": "line",
+        }
         if cls in model:
             entry["model_freq_cpm"], entry["model_amplitude_arcsec"] = model[cls]
         out.append(entry)
@@ -178,7 +188,14 @@ def labelled_lines(drive: HarmonicDrive, rec: Record, *, count: int = 8, signal:
         for f, a in peaks:
             near = min(real, key=lambda e: abs(e["freq_cpm"] - f)) if real else None
             what = f"the {near['freq_cpm']:.2f} cpm line" if near else "no line"
-            out.append({"freq_cpm": f, "amplitude_arcsec": a * ARCSEC_PER_RAD,
-                        "source": f"none: side lobe of the Hann window around {what}", "class": None, "kind": "side_lobe"})
+            out.append(
+                {
+                    "freq_cpm": f,
+                    "amplitude_arcsec": a * ARCSEC_PER_RAD,
+                    "source": f"none: side lobe of the Hann window around {what}",
+                    "class": None,
+                    "kind": "side_lobe",
+                }
+            )
     out.sort(key=lambda e: -e["amplitude_arcsec"])
     return out

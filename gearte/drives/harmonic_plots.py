@@ -37,6 +37,7 @@ def record_with_envelope(time_s, te, *, envelopes=(), unit: str, title: str, pat
     fig.tight_layout()
     fig.savefig(path)
 
+
 def labelled_spectrum(freq_cpm, amplitude, lines, *, unit: str, title: str, path, zooms=(), zoom_spectrum=None):
     """Amplitude spectrum in cycles per minute with labelled lines; `lines` = [(cpm, amplitude, label, is_line)].
 
@@ -82,6 +83,7 @@ def labelled_spectrum(freq_cpm, amplitude, lines, *, unit: str, title: str, path
         ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     fig.savefig(path)
+
 
 def histogram_with_estimates(values, *, percentiles, estimates, unit: str, metric: str, title: str, path, bins: int = 80):
     """Monte Carlo histogram with its median and P99.73 and vertical lines for design estimates.

@@ -22,8 +22,8 @@ CLASSES: dict[str, dict] = {
         "kinds": ("runout", "cumulative_pitch"),
         "symbol": "e_2i",
         "examples": "CS eccentricity (cumulative pitch), CS mounting bore run-out and fit clearance, output-shaft fit; "
-                    "WG-side errors that do not turn with the WG: input bearing bore run-out, input shaft–housing clearance, "
-                    "flexible-bearing radial run-out and clearance",
+        "WG-side errors that do not turn with the WG: input bearing bore run-out, input shaft–housing clearance, "
+        "flexible-bearing radial run-out and clearance",
     },
     "flexspline": {
         "short": "FS",
@@ -97,8 +97,9 @@ class HarmonicSource(eqx.Module):
         if kind not in KINDS:
             raise ValueError(f"HarmonicSource {name!r}: kind must be one of {list(KINDS)}, got {kind!r}")
         if kind not in allowed:
-            raise ValueError(f"HarmonicSource {name!r}: a {kind!r} source cannot be in the {source_class} class; "
-                             f"that class takes {list(allowed)}")
+            raise ValueError(
+                f"HarmonicSource {name!r}: a {kind!r} source cannot be in the {source_class} class; that class takes {list(allowed)}"
+            )
         self.name, self.source_class, self.kind = name, source_class, kind
         self.tolerance = finite(f"HarmonicSource {name!r}: tolerance (µm)", tolerance, nonnegative=True)
 
@@ -123,8 +124,16 @@ class HarmonicRunSettings(eqx.Module):
     adjustable: tuple[str, ...] = eqx.field(static=True)
     assembly_starts: int = eqx.field(static=True)
 
-    def __init__(self, *, input_rpm: float, duration_s: float, sample_rate_hz: float, lines: int = 8,
-                 adjustable: Sequence[str] = (), assembly_starts: int = 32):
+    def __init__(
+        self,
+        *,
+        input_rpm: float,
+        duration_s: float,
+        sample_rate_hz: float,
+        lines: int = 8,
+        adjustable: Sequence[str] = (),
+        assembly_starts: int = 32,
+    ):
         self.input_rpm = finite("input_rpm", input_rpm, positive=True)
         self.duration_s = finite("duration_s", duration_s, positive=True)
         self.sample_rate_hz = finite("sample_rate_hz", sample_rate_hz, positive=True)

@@ -131,7 +131,9 @@ class Planetary2KH(AbstractSinusoidalDrive):
         if not a0 < math.radians(45):
             raise ValueError(f"pressure_angle: {math.degrees(a0):g}° is not a gear pressure angle (give rad; 20° = {math.radians(20):.6f})")
         if {input, output, fixed} != set(MEMBERS):
-            raise ValueError(f"input, output, fixed must be sun, carrier and ring in some order, got input={input!r}, output={output!r}, fixed={fixed!r}")
+            raise ValueError(
+                f"input, output, fixed must be sun, carrier and ring in some order, got input={input!r}, output={output!r}, fixed={fixed!r}"
+            )
         if coupling not in COUPLINGS:
             raise ValueError(f"coupling: must be one of {COUPLINGS}, got {coupling!r}")
         if centre_distance is None:
@@ -169,7 +171,9 @@ class Planetary2KH(AbstractSinusoidalDrive):
         if n > 1:
             gaps = [(order[(i + 1) % n] - order[i]) % (2 * math.pi) or 2 * math.pi for i in range(n)]
             if 2 * a * math.sin(min(gaps) / 2) <= m * (zp + 2):
-                raise ValueError(f"planets clash: {n} planets of {zp} teeth do not fit around a {zs}-tooth sun (planet tip circles overlap)")
+                raise ValueError(
+                    f"planets clash: {n} planets of {zp} teeth do not fit around a {zs}-tooth sun (planet tip circles overlap)"
+                )
         self.z_sun, self.z_planet, self.z_ring, self.n_planets = zs, zp, zr, n
         self.module = jnp.asarray(m)
         self.pressure_angle = jnp.asarray(a0)
@@ -182,9 +186,16 @@ class Planetary2KH(AbstractSinusoidalDrive):
 
     @property
     def error_sources(self) -> dict[str, SourceSpec]:
-        return {name: SourceSpec(name, "eccentricity", shape=(self.n_planets if per_planet else 1,), symbol=sym,
-                                 description=name.replace("_", " ") + " eccentricity" + (", one per planet" if per_planet else ""))
-                for name, (sym, per_planet) in SOURCES.items()}
+        return {
+            name: SourceSpec(
+                name,
+                "eccentricity",
+                shape=(self.n_planets if per_planet else 1,),
+                symbol=sym,
+                description=name.replace("_", " ") + " eccentricity" + (", one per planet" if per_planet else ""),
+            )
+            for name, (sym, per_planet) in SOURCES.items()
+        }
 
     @classmethod
     def from_table(cls, table: Table) -> Planetary2KH:
@@ -288,14 +299,21 @@ class Planetary2KH(AbstractSinusoidalDrive):
             ("tooth counts z_sun / z_planet / z_ring", f"{self.z_sun} / {self.z_planet} / {self.z_ring}"),
             ("module", f"{float(self.module):g} mm"),
             ("pressure angle α₀", f"{math.degrees(float(self.pressure_angle)):.6g}°"),
-            ("working pressure angles α_w (sun–planet) / α_n (ring–planet)",
-             f"{math.degrees(float(self.working_angle_external)):.6g}° / {math.degrees(float(self.working_angle_internal)):.6g}°"),
+            (
+                "working pressure angles α_w (sun–planet) / α_n (ring–planet)",
+                f"{math.degrees(float(self.working_angle_external)):.6g}° / {math.degrees(float(self.working_angle_internal)):.6g}°",
+            ),
             ("planets", f"{self.n_planets} at " + ", ".join(f"{math.degrees(float(x)):.6g}°" for x in self.planet_angles)),
             ("configuration", f"{self.input} input, {self.output} output, {self.fixed} fixed"),
             ("ratio i (input/output)", f"{self.ratio} = {float(self.ratio):.6g}"),
             ("speeds (× input): sun, carrier, ring, planet", ", ".join(f"{w[k]}" for k in ("sun", "carrier", "ring", "planet"))),
-            ("planet coupling", {"single_path": "single path: planet 1's path alone (the paper's assumption)",
-                                 "load_sharing": "equal load sharing: mean of the N planet paths"}[self.coupling]),
+            (
+                "planet coupling",
+                {
+                    "single_path": "single path: planet 1's path alone (the paper's assumption)",
+                    "load_sharing": "equal load sharing: mean of the N planet paths",
+                }[self.coupling],
+            ),
             ("output error per µm of (e_w + e_n)", f"{float(self._gain()) * ARCSEC_PER_RAD:.6g}″/µm"),
         ]
         rows += [(f"frequency of {k} on the LOA (× input speed)", str(v)) for k, v in self.source_frequencies().items()]

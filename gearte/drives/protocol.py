@@ -79,8 +79,17 @@ class SourceSpec(eqx.Module):
     symbol: str = eqx.field(static=True)
     description: str = eqx.field(static=True)
 
-    def __init__(self, name: str, kind: SourceKind = "eccentricity", *, shape: tuple[int, ...] = (1,), unit: str = "µm",
-                 tolerance: float | None = None, symbol: str | None = None, description: str = ""):
+    def __init__(
+        self,
+        name: str,
+        kind: SourceKind = "eccentricity",
+        *,
+        shape: tuple[int, ...] = (1,),
+        unit: str = "µm",
+        tolerance: float | None = None,
+        symbol: str | None = None,
+        description: str = "",
+    ):
         if kind not in ("eccentricity", "deviation"):
             raise ValueError(f"SourceSpec {name!r}: kind must be 'eccentricity' or 'deviation', got {kind!r}")
         if unit not in ("µm", "rad"):
@@ -230,16 +239,20 @@ class AbstractDrive(eqx.Module):
         unknown = sorted(set(errors) - set(specs))
         missing = sorted(set(specs) - set(errors))
         if unknown or missing:
-            raise ValueError(f"{name}: errors must name exactly {list(specs)}"
-                             + (f"; unknown {unknown}" if unknown else "") + (f"; missing {missing}" if missing else ""))
+            raise ValueError(
+                f"{name}: errors must name exactly {list(specs)}"
+                + (f"; unknown {unknown}" if unknown else "")
+                + (f"; missing {missing}" if missing else "")
+            )
         out = {}
         for n, spec in specs.items():
             e = errors[n]
             if spec.kind == "eccentricity":
                 if not isinstance(e, Eccentricity):
                     raise ValueError(f"{name}: errors[{n!r}] must be an Eccentricity(magnitude_um, phase_rad)")
-                out[n] = Eccentricity(_broadcast(name, n, "magnitude", e.magnitude, spec.shape),
-                                      _broadcast(name, n, "phase", e.phase, spec.shape))
+                out[n] = Eccentricity(
+                    _broadcast(name, n, "magnitude", e.magnitude, spec.shape), _broadcast(name, n, "phase", e.phase, spec.shape)
+                )
             else:
                 if isinstance(e, Eccentricity):
                     raise ValueError(f"{name}: errors[{n!r}] is a signed deviation ({spec.unit}); give a number or an array")
@@ -248,8 +261,10 @@ class AbstractDrive(eqx.Module):
 
     def zero_errors(self) -> dict[str, Any]:
         """Every source at zero (eccentricities of magnitude 0 at phase 0)."""
-        return {n: (Eccentricity(jnp.zeros(s.shape), jnp.zeros(s.shape)) if s.kind == "eccentricity" else jnp.zeros(s.shape))
-                for n, s in self.error_sources.items()}
+        return {
+            n: (Eccentricity(jnp.zeros(s.shape), jnp.zeros(s.shape)) if s.kind == "eccentricity" else jnp.zeros(s.shape))
+            for n, s in self.error_sources.items()
+        }
 
 
 def _broadcast(drive: str, source: str, what: str, arr: Array, shape: tuple[int, ...]) -> Array:
@@ -290,9 +305,11 @@ class AbstractSinusoidalDrive(AbstractDrive):
         return {"peak": Peak(), "peak_to_peak": PeakToPeak(), "rms": RMS()}
 
     def accuracy(self) -> str:
-        return ("exact over the whole hyper-period: a grid of 16 points per period of the fastest term, the best maxima "
-                "refined by Newton's method on the exact trigonometric polynomial until a bound certifies the result "
-                "(≤ 1e-6 relative; tested to ~1e-10 against a dense reference)")
+        return (
+            "exact over the whole hyper-period: a grid of 16 points per period of the fastest term, the best maxima "
+            "refined by Newton's method on the exact trigonometric polynomial until a bound certifies the result "
+            "(≤ 1e-6 relative; tested to ~1e-10 against a dense reference)"
+        )
 
     def trace(self, errors: Errors) -> Trace:
         signal = self.signal(errors)
@@ -303,9 +320,16 @@ class AbstractSinusoidalDrive(AbstractDrive):
         theta = np.linspace(0.0, 2 * np.pi * revs, npts)
         amp = np.hypot(np.asarray(signal.cos_coef), np.asarray(signal.sin_coef))
         lines = [("0 (constant)", float(signal.offset))] + [(str(f), float(a)) for f, a in zip(signal.frequencies, amp)]
-        return Trace(theta=theta, te=np.asarray(evaluate(signal, theta)), span_revs=str(signal.hyper_period_revs),
-                     max=float(ext.max), min=float(ext.min), theta_max=float(ext.theta_max), theta_min=float(ext.theta_min),
-                     lines=lines)
+        return Trace(
+            theta=theta,
+            te=np.asarray(evaluate(signal, theta)),
+            span_revs=str(signal.hyper_period_revs),
+            max=float(ext.max),
+            min=float(ext.min),
+            theta_max=float(ext.theta_max),
+            theta_min=float(ext.theta_min),
+            lines=lines,
+        )
 
     def bytes_per_sample(self) -> int:
         sig = jax.eval_shape(lambda: self.signal(self.zero_errors()))

@@ -57,8 +57,10 @@ def _partial(result) -> bool:
 
 def _check_drive(drive) -> None:
     if not isinstance(drive, AbstractSinusoidalDrive):
-        raise ValueError(f"assembly-phase allocation needs a drive whose TE is a sum of sinusoids with phases "
-                         f"(planetary, harmonic, explicit); {type(drive).__name__} is not one")
+        raise ValueError(
+            f"assembly-phase allocation needs a drive whose TE is a sum of sinusoids with phases "
+            f"(planetary, harmonic, explicit); {type(drive).__name__} is not one"
+        )
 
 
 def _check_metric(metric) -> None:
@@ -93,7 +95,10 @@ def _with_phases(errors: Mapping[str, Eccentricity], names: list[str], counts: l
     out = dict(errors)
     i = 0
     for n, c in zip(names, counts):
-        out[n] = Eccentricity(jnp.broadcast_to(errors[n].magnitude, (c,)) if errors[n].magnitude.ndim else errors[n].magnitude, y[i:i + c] if c > 1 else y[i])
+        out[n] = Eccentricity(
+            jnp.broadcast_to(errors[n].magnitude, (c,)) if errors[n].magnitude.ndim else errors[n].magnitude,
+            y[i : i + c] if c > 1 else y[i],
+        )
         i += c
     return out
 
@@ -174,12 +179,20 @@ def allocate_measured(
         y_best, te_best, enumerated = _discrete(exact, y_best, y_given, steps, enumerate_limit)
     phases, i = {}, 0
     for n, c in zip(names, counts):
-        phases[n] = jnp.mod(y_best[i:i + c], _TWO_PI) if c > 1 else jnp.mod(y_best[i], _TWO_PI)
+        phases[n] = jnp.mod(y_best[i : i + c], _TWO_PI) if c > 1 else jnp.mod(y_best[i], _TWO_PI)
         i += c
     converged, result = _starts_result(sol.result, best)
     check(result, throw=throw and not _partial(result), what="allocate_measured")
-    return MeasuredAllocation(phases=phases, te=te_best, te_before=te_before, result=result, metric=metric, starts=starts,
-                              converged=converged, enumerated=enumerated)
+    return MeasuredAllocation(
+        phases=phases,
+        te=te_best,
+        te_before=te_before,
+        result=result,
+        metric=metric,
+        starts=starts,
+        converged=converged,
+        enumerated=enumerated,
+    )
 
 
 def _discrete(exact, y_cont, y_given, steps, limit):
@@ -196,7 +209,7 @@ def _discrete(exact, y_cont, y_given, steps, limit):
     f = jax.jit(jax.vmap(exact))
     if total <= limit:
         mesh = np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, len(grids))
-        vals = np.concatenate([np.asarray(f(jnp.asarray(mesh[i:i + 4096]))) for i in range(0, total, 4096)])
+        vals = np.concatenate([np.asarray(f(jnp.asarray(mesh[i : i + 4096]))) for i in range(0, total, 4096)])
         i = int(np.argmin(vals))
         return jnp.asarray(mesh[i]), jnp.asarray(vals[i]), True
     # Too many combinations: round, then coordinate descent over neighbouring positions.
@@ -291,8 +304,9 @@ def _rule_order(p: RuleProblem) -> list[str]:
     return order
 
 
-def rule_problem(drive: AbstractSinusoidalDrive, model: ErrorModel, *, adjust: Mapping[str, str], datum: str,
-                 tolerances: Mapping[str, float]) -> RuleProblem:
+def rule_problem(
+    drive: AbstractSinusoidalDrive, model: ErrorModel, *, adjust: Mapping[str, str], datum: str, tolerances: Mapping[str, float]
+) -> RuleProblem:
     """Set up an assembly-rule problem.
 
     **Arguments:**
@@ -323,8 +337,14 @@ def rule_problem(drive: AbstractSinusoidalDrive, model: ErrorModel, *, adjust: M
         if not (math.isfinite(float(t)) and float(t) >= 0):
             raise ValueError(f"tolerances[{n!r}]: must be a finite number ≥ 0 µm, got {t!r}")
     free = tuple((n, i) for n in counts if n not in adjust and isinstance(model.sources[n].phase, UniformPhase) for i in range(counts[n]))
-    return RuleProblem(drive=drive, model=model, tolerances={n: jnp.asarray(float(tolerances[n])) for n in counts},
-                       adjust=dict(adjust), datum=datum, free=free)
+    return RuleProblem(
+        drive=drive,
+        model=model,
+        tolerances={n: jnp.asarray(float(tolerances[n])) for n in counts},
+        adjust=dict(adjust),
+        datum=datum,
+        free=free,
+    )
 
 
 def _groups(p: RuleProblem) -> tuple[np.ndarray, bool]:
@@ -407,15 +427,24 @@ class _RuleSample(eqx.Module):
         k_b, k_m = jax.random.split(key)
         beta = _TWO_PI * jax.random.uniform(k_b, (len(p.free),), dtype=float)
         if self.robust:
-            mags = {n: p.model.sources[n].magnitude.sample(jax.random.fold_in(k_m, j), (p.model.counts[n],))
-                    for j, n in enumerate(p.model.counts)}
+            mags = {
+                n: p.model.sources[n].magnitude.sample(jax.random.fold_in(k_m, j), (p.model.counts[n],))
+                for j, n in enumerate(p.model.counts)
+            }
         else:
             mags = p.tolerances
         return self.metric(p.drive, p.drive.signal(p.errors(mags, beta, self.offsets)))
 
 
-def expected(p: RuleProblem, offsets: Array, *, key: int | PRNGKeyArray, n_samples: int = 50_000, robust: bool = False,
-             metric: AbstractMetric = Peak()) -> Float[Array, ""]:
+def expected(
+    p: RuleProblem,
+    offsets: Array,
+    *,
+    key: int | PRNGKeyArray,
+    n_samples: int = 50_000,
+    robust: bool = False,
+    metric: AbstractMetric = Peak(),
+) -> Float[Array, ""]:
     """Mean exact metric (rad) over uniform unknown phases, magnitudes at the tolerances
     (or drawn by their laws if `robust`), by Monte Carlo with `n_samples` samples."""
     fn = _RuleSample(p, jnp.asarray(offsets, dtype=float), robust, metric)
@@ -441,12 +470,17 @@ class RuleAllocation(eqx.Module):
     converged: int = eqx.field(static=True)
 
 
-def evaluate_rule(p: RuleProblem, offsets: Mapping[str, float] | Array, *, key: int | PRNGKeyArray, n_check: int = 50_000) -> dict[str, Array]:
+def evaluate_rule(
+    p: RuleProblem, offsets: Mapping[str, float] | Array, *, key: int | PRNGKeyArray, n_check: int = 50_000
+) -> dict[str, Array]:
     """Exact worst case, expected and robust TE (rad) of a rule (e.g. Wang et al.'s Table 3 rule)."""
     off = jnp.asarray([offsets[n] for n in p.adjust], dtype=float) if isinstance(offsets, Mapping) else jnp.asarray(offsets, dtype=float)
     k1, k2 = jax.random.split(as_key(key))
-    return {"worst_case": worst_case(p, off), "expected": expected(p, off, key=k1, n_samples=n_check),
-            "robust": expected(p, off, key=k2, n_samples=n_check, robust=True)}
+    return {
+        "worst_case": worst_case(p, off),
+        "expected": expected(p, off, key=k1, n_samples=n_check),
+        "robust": expected(p, off, key=k2, n_samples=n_check, robust=True),
+    }
 
 
 def allocate_rule(
@@ -509,6 +543,13 @@ def allocate_rule(
     converged, result = _starts_result(sol.result, best)
     # The surrogate is smooth but flat along valleys: a start that stops there is still scored exactly.
     check(result, throw=throw and not _partial(result), what="allocate_rule")
-    return RuleAllocation(offsets={n: y_best[i] for i, n in enumerate(p.adjust)}, worst_case=figures["worst_case"],
-                          expected=figures["expected"], robust=figures["robust"], result=result, objective=objective,
-                          starts=starts, converged=converged)
+    return RuleAllocation(
+        offsets={n: y_best[i] for i, n in enumerate(p.adjust)},
+        worst_case=figures["worst_case"],
+        expected=figures["expected"],
+        robust=figures["robust"],
+        result=result,
+        objective=objective,
+        starts=starts,
+        converged=converged,
+    )

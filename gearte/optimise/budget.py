@@ -91,8 +91,12 @@ class BudgetProblem(eqx.Module):
     @property
     def homogeneous(self) -> bool:
         """Whether every statistic is positively homogeneous of degree 1 in the tolerances."""
-        return (self.drive.linear and all(c.metric.homogeneous and not c.metric.higher_is_better for c in self.constraints)
-                and all(_centre(self.model, n) is None for n in self.names) and set(self.names) == set(self.model.specs))
+        return (
+            self.drive.linear
+            and all(c.metric.homogeneous and not c.metric.higher_is_better for c in self.constraints)
+            and all(_centre(self.model, n) is None for n in self.names)
+            and set(self.names) == set(self.model.specs)
+        )
 
 
 def _centre(model: ErrorModel, name: str):
@@ -145,8 +149,11 @@ def budget_problem(
         missing = [n for n in names if n not in m]
         extra = [n for n in m if n not in names]
         if missing or extra:
-            raise ValueError(f"{what}: give one entry per budgeted source {names}" + (f"; missing {missing}" if missing else "")
-                             + (f"; unknown {extra}" if extra else ""))
+            raise ValueError(
+                f"{what}: give one entry per budgeted source {names}"
+                + (f"; missing {missing}" if missing else "")
+                + (f"; unknown {extra}" if extra else "")
+            )
     for n in names:
         if not isinstance(costs[n], AbstractCostModel):
             raise ValueError(f"costs[{n!r}]: expected a cost model such as gearte.Reciprocal(a, b)")
@@ -183,10 +190,16 @@ def budget_problem(
     w = float(width) if width is not None else 5e-3
     if not (math.isfinite(w) and 0 < w < 1):
         raise ValueError(f"width: a relative width in (0, 1), got {width!r}")
-    return BudgetProblem(drive=drive, model=model, costs={n: costs[n] for n in names},
-                         nominal={n: jnp.asarray(float(nominal[n])) for n in names},
-                         maximum={n: jnp.asarray(maximum[n]) for n in names}, minimum={n: jnp.asarray(minimum[n]) for n in names},
-                         constraints=constraints, width=jnp.asarray(w))
+    return BudgetProblem(
+        drive=drive,
+        model=model,
+        costs={n: costs[n] for n in names},
+        nominal={n: jnp.asarray(float(nominal[n])) for n in names},
+        maximum={n: jnp.asarray(maximum[n]) for n in names},
+        minimum={n: jnp.asarray(minimum[n]) for n in names},
+        constraints=constraints,
+        width=jnp.asarray(w),
+    )
 
 
 class _Draws(eqx.Module):
@@ -219,6 +232,7 @@ def _errors_at(p: BudgetProblem, tolerances: Mapping[str, Array], u: Mapping[str
 
 def metric_samples(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws, *, exact: bool = False) -> Float[Array, "c n"]:
     """Each constraint's metric (rad for angles) for every drawn sample at these tolerances: smooth, or `exact`."""
+
     def one(u, errs):
         r = p.drive.response(_errors_at(p, tolerances, u, errs))
         return jnp.stack([c.metric(p.drive, r) if exact else c.metric.smooth(p.drive, r) for c in p.constraints])
@@ -346,8 +360,9 @@ def _exact_stat(c: Constraint, x: np.ndarray, margin_samples: int | None = None)
     return c.statistic.exact(x, lower=c.metric.higher_is_better, margin_samples=margin_samples)
 
 
-def _calibrate_and_verify(p: BudgetProblem, direction: dict[str, float], capped: set[str], *, key, n_check: int, label: str,
-                          result, converged: bool) -> BudgetResult:
+def _calibrate_and_verify(
+    p: BudgetProblem, direction: dict[str, float], capped: set[str], *, key, n_check: int, label: str, result, converged: bool
+) -> BudgetResult:
     """Scale the uncapped tolerances so every exact statistic on a fresh sample meets its spec with
     a four-standard-error margin, then verify on another fresh sample."""
     k_cal, k_ver = jax.random.split(key)
@@ -356,8 +371,12 @@ def _calibrate_and_verify(p: BudgetProblem, direction: dict[str, float], capped:
     run = jax.jit(lambda t, d: metric_samples(p, t, d, exact=True))
 
     def ok(x) -> bool:
-        return all((_exact_stat(c, np.asarray(x[j]), n_check) >= float(c.spec)) if c.metric.higher_is_better
-                   else (_exact_stat(c, np.asarray(x[j]), n_check) <= float(c.spec)) for j, c in enumerate(p.constraints))
+        return all(
+            (_exact_stat(c, np.asarray(x[j]), n_check) >= float(c.spec))
+            if c.metric.higher_is_better
+            else (_exact_stat(c, np.asarray(x[j]), n_check) <= float(c.spec))
+            for j, c in enumerate(p.constraints)
+        )
 
     def at(scale):
         return {n: jnp.asarray(direction[n] if n in capped else direction[n] * scale) for n in p.names}
@@ -380,14 +399,23 @@ def _calibrate_and_verify(p: BudgetProblem, direction: dict[str, float], capped:
         result = RESULTS.infeasible
     x = np.asarray(run(tol, ver))
     met = [_met(c, x[j]) for j, c in enumerate(p.constraints)]
-    return BudgetResult(tolerances={n: float(v) for n, v in tol.items()}, cost=float(total_cost(p, tol)),
-                        verified_yield=float(np.mean(np.logical_and.reduce(met))), verified_yields=tuple(float(np.mean(m)) for m in met),
-                        verified_statistic=_exact_stat(p.constraints[0], x[0]), verified_samples=n_check, verified_values=x[0],
-                        result=result, converged=converged, label=label)
+    return BudgetResult(
+        tolerances={n: float(v) for n, v in tol.items()},
+        cost=float(total_cost(p, tol)),
+        verified_yield=float(np.mean(np.logical_and.reduce(met))),
+        verified_yields=tuple(float(np.mean(m)) for m in met),
+        verified_statistic=_exact_stat(p.constraints[0], x[0]),
+        verified_samples=n_check,
+        verified_values=x[0],
+        result=result,
+        converged=converged,
+        label=label,
+    )
 
 
-def optimise_budget(p: BudgetProblem, *, key: int | PRNGKeyArray, n_samples: int = 4096, n_check: int = 50_000,
-                    max_steps: int = 300, throw: bool = True) -> BudgetResult:
+def optimise_budget(
+    p: BudgetProblem, *, key: int | PRNGKeyArray, n_samples: int = 4096, n_check: int = 50_000, max_steps: int = 300, throw: bool = True
+) -> BudgetResult:
     """The cheapest tolerances meeting the constraints, checked on a fresh Monte Carlo sample.
 
     **Arguments:**
@@ -409,9 +437,13 @@ def optimise_budget(p: BudgetProblem, *, key: int | PRNGKeyArray, n_samples: int
     finest = {n: (p.minimum[n] if float(p.minimum[n]) > 0 else _BRACKET[0] * p.nominal[n]) for n in p.names}
     worst = float(jnp.max(_violation(p, metric_samples(p, finest, draws))))
     if worst > 0:
-        check(RESULTS.infeasible, throw=throw, what=f"optimise_budget: even at the tolerances "
-              f"{({n: float(v) for n, v in finest.items()})} a constraint is missed by {worst:.4g} (the other sources' "
-              "laws alone break it)")
+        check(
+            RESULTS.infeasible,
+            throw=throw,
+            what=f"optimise_budget: even at the tolerances "
+            f"{ ({n: float(v) for n, v in finest.items()}) } a constraint is missed by {worst:.4g} (the other sources' "
+            "laws alone break it)",
+        )
         return _failed(p, RESULTS.infeasible)
 
     def objective(y, args):
@@ -425,29 +457,46 @@ def optimise_budget(p: BudgetProblem, *, key: int | PRNGKeyArray, n_samples: int
     capped = {n for n in p.names if float(tol[n]) >= float(p.maximum[n])}
     finer = [n for n in p.names if float(tol[n]) < float(p.minimum[n])]
     if finer:
-        check(RESULTS.infeasible, throw=throw, what=f"optimise_budget: the cheapest budget needs {finer} finer than their "
-              "minimum tolerances")
+        check(
+            RESULTS.infeasible, throw=throw, what=f"optimise_budget: the cheapest budget needs {finer} finer than their minimum tolerances"
+        )
         return _failed(p, RESULTS.infeasible)
     direction = {n: min(float(tol[n]), float(p.maximum[n])) for n in p.names}
     result = RESULTS.promote(sol.result)
     converged = bool(sol.result == optx.RESULTS.successful)
     check(result, throw=throw, what="optimise_budget (BFGS on the smoothed cost)")
-    return _calibrate_and_verify(p, direction, capped, key=k_check, n_check=n_check, label="optimised", result=result,
-                                 converged=converged)
+    return _calibrate_and_verify(p, direction, capped, key=k_check, n_check=n_check, label="optimised", result=result, converged=converged)
 
 
 def _failed(p: BudgetProblem, result) -> BudgetResult:
     nan = float("nan")
-    return BudgetResult(tolerances={n: nan for n in p.names}, cost=nan, verified_yield=nan, verified_yields=(),
-                        verified_statistic=nan, verified_samples=0, verified_values=np.zeros(0), result=result, converged=False,
-                        label="infeasible")
+    return BudgetResult(
+        tolerances={n: nan for n in p.names},
+        cost=nan,
+        verified_yield=nan,
+        verified_yields=(),
+        verified_statistic=nan,
+        verified_samples=0,
+        verified_values=np.zeros(0),
+        result=result,
+        converged=False,
+        label="infeasible",
+    )
 
 
 def uniform_scaling(p: BudgetProblem, *, key: int | PRNGKeyArray, n_check: int = 50_000) -> BudgetResult:
     """Baseline: the nominal tolerances scaled by one common factor to meet the same constraints."""
     _, k_check = jax.random.split(as_key(key))
-    return _calibrate_and_verify(p, {n: float(v) for n, v in p.nominal.items()}, set(), key=k_check, n_check=n_check,
-                                 label="uniform scaling of the nominal tolerances", result=RESULTS.successful, converged=True)
+    return _calibrate_and_verify(
+        p,
+        {n: float(v) for n, v in p.nominal.items()},
+        set(),
+        key=k_check,
+        n_check=n_check,
+        label="uniform scaling of the nominal tolerances",
+        result=RESULTS.successful,
+        converged=True,
+    )
 
 
 def contributions(p: BudgetProblem, tolerances: Mapping[str, float], *, key: int | PRNGKeyArray, n_samples: int = 8192) -> dict[str, float]:

@@ -227,11 +227,11 @@ class GradeTable(AbstractCostModel):
     ):
         standard = check_standard(standard)
         # Validates the quantity and the gear once, here.
-        iso1328_tolerance(quantity, standard=standard, module=module, diameter=diameter,
-                          face_width=face_width, grade=5.0, teeth=teeth)
+        iso1328_tolerance(quantity, standard=standard, module=module, diameter=diameter, face_width=face_width, grade=5.0, teeth=teeth)
         if not isinstance(costs_by_grade, Mapping) or len(costs_by_grade) < 2:
-            raise ValueError("GradeTable.costs_by_grade: expected a mapping {grade: cost} with at least two grades, "
-                             f"got {costs_by_grade!r}")
+            raise ValueError(
+                f"GradeTable.costs_by_grade: expected a mapping {{grade: cost}} with at least two grades, got {costs_by_grade!r}"
+            )
         lo, hi = GRADES[standard]
         items = []
         for g, c in costs_by_grade.items():
@@ -243,8 +243,10 @@ class GradeTable(AbstractCostModel):
         items.sort()
         for (g0, c0), (g1, c1) in zip(items[:-1], items[1:]):
             if c1 > c0:
-                raise ValueError(f"GradeTable.costs_by_grade: grade {g1} costs more ({c1:g}) than the finer grade {g0} "
-                                 f"({c0:g}); a coarser grade should not cost more")
+                raise ValueError(
+                    f"GradeTable.costs_by_grade: grade {g1} costs more ({c1:g}) than the finer grade {g0} "
+                    f"({c0:g}); a coarser grade should not cost more"
+                )
         x = np.array([g for g, _ in items], dtype=float)
         y = np.log(np.array([c for _, c in items], dtype=float))
         h = np.diff(x)
@@ -268,9 +270,15 @@ class GradeTable(AbstractCostModel):
 
     def grade(self, T: ArrayLike, *, throw: bool = True) -> Float[Array, ...]:
         """Continuous grade of the tolerance `T` µm for this gear and quantity."""
-        return grade_for_tolerance(_tolerance(T, throw), quantity=self.quantity, standard=self.standard,
-                                   module=self.module, diameter=self.diameter, face_width=self.face_width,
-                                   teeth=self.teeth)
+        return grade_for_tolerance(
+            _tolerance(T, throw),
+            quantity=self.quantity,
+            standard=self.standard,
+            module=self.module,
+            diameter=self.diameter,
+            face_width=self.face_width,
+            teeth=self.teeth,
+        )
 
     def __call__(self, T, *, throw=True):
         q = self.grade(T, throw=throw)
@@ -281,8 +289,7 @@ class GradeTable(AbstractCostModel):
         h = x1 - x0
         t = (q - x0) / h
         t2, t3 = t * t, t * t * t
-        inside = ((2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + t) * h * d0
-                  + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * h * d1)
+        inside = (2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + t) * h * d0 + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * h * d1
         below = y[0] + d[0] * (q - x[0])
         above = y[-1] + d[-1] * (q - x[-1])
         log_c = jnp.where(q < x[0], below, jnp.where(q > x[-1], above, inside))
@@ -290,5 +297,7 @@ class GradeTable(AbstractCostModel):
 
     def describe(self) -> str:
         table = ", ".join(f"{int(g)}: {math.exp(float(c)):g}" for g, c in zip(self.grades, self.log_costs))
-        return (f"grade table for {self.quantity} (ISO {self.standard}, m {self.module:g} mm, d {self.diameter:g} mm), "
-                f"cost by grade {{{table}}}, monotone cubic in log-cost, power law beyond the ends")
+        return (
+            f"grade table for {self.quantity} (ISO {self.standard}, m {self.module:g} mm, d {self.diameter:g} mm), "
+            f"cost by grade {{{table}}}, monotone cubic in log-cost, power law beyond the ends"
+        )

@@ -112,10 +112,19 @@ def _default_starts(drive: CycloidPin, target_rad: float, radial_min: float, rot
     return starts
 
 
-def optimise_modification(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] | None = None, *, lost_motion_max: float,
-                          lost_motion_min: float = 0.0, radial_clearance_min: float = 0.0, positions: ArrayLike | None = None,
-                          rotation: bool = False, starts: Sequence[Sequence[float]] | None = None, max_steps: int = 200,
-                          throw: bool = True) -> ModificationSolution:
+def optimise_modification(
+    drive: CycloidPin,
+    errors: CycloidErrors | Mapping[str, Any] | None = None,
+    *,
+    lost_motion_max: float,
+    lost_motion_min: float = 0.0,
+    radial_clearance_min: float = 0.0,
+    positions: ArrayLike | None = None,
+    rotation: bool = False,
+    starts: Sequence[Sequence[float]] | None = None,
+    max_steps: int = 200,
+    throw: bool = True,
+) -> ModificationSolution:
     """Choose the modification that maximises the loaded pairs with the lost motion within a spec.
 
     **Arguments:**
@@ -138,8 +147,11 @@ def optimise_modification(drive: CycloidPin, errors: CycloidErrors | Mapping[str
     require_x64()
     if not isinstance(drive, CycloidPin):
         raise ValueError(f"drive: expected a CycloidPin, got {type(drive).__name__}")
-    for name, v in (("lost_motion_max", lost_motion_max), ("lost_motion_min", lost_motion_min),
-                    ("radial_clearance_min", radial_clearance_min)):
+    for name, v in (
+        ("lost_motion_max", lost_motion_max),
+        ("lost_motion_min", lost_motion_min),
+        ("radial_clearance_min", radial_clearance_min),
+    ):
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
             raise ValueError(f"{name}: must be a finite number ≥ 0, got {v!r}")
     if not lost_motion_max > lost_motion_min:
@@ -155,16 +167,23 @@ def optimise_modification(drive: CycloidPin, errors: CycloidErrors | Mapping[str
         d = _with(drive, jnp.asarray(x, dtype=float), rotation)
         m = grid_metrics_jit(d, err, pos)
         radial = float(x[1] - x[0])
-        ok = (float(m["lost_motion_max"]) <= lm_hi * (1 + 1e-9) and float(m["lost_motion_min"]) >= lm_lo - 1e-12
-              and radial >= c_lo - 1e-12)
+        ok = float(m["lost_motion_max"]) <= lm_hi * (1 + 1e-9) and float(m["lost_motion_min"]) >= lm_lo - 1e-12 and radial >= c_lo - 1e-12
         try:
             check_modification(d)
         except ValueError:
             ok = False
-        return ModificationStart(start=(), end=tuple(float(v) for v in x), results=(), steps=(),
-                                 loaded_pairs_min=int(m["loaded_pairs_min"]), loaded_pairs_mean=float(m["loaded_pairs_mean"]),
-                                 lost_motion_max=float(m["lost_motion_max"]), lost_motion_min=float(m["lost_motion_min"]),
-                                 radial_clearance=radial, feasible=bool(ok))
+        return ModificationStart(
+            start=(),
+            end=tuple(float(v) for v in x),
+            results=(),
+            steps=(),
+            loaded_pairs_min=int(m["loaded_pairs_min"]),
+            loaded_pairs_mean=float(m["loaded_pairs_mean"]),
+            lost_motion_max=float(m["lost_motion_max"]),
+            lost_motion_min=float(m["lost_motion_min"]),
+            radial_clearance=radial,
+            feasible=bool(ok),
+        )
 
     # The quadratic penalty leaves violations of order 1/μ; aim inside the constraints by a margin
     # (10⁻³′ and 10⁻⁵ mm) so that the optimum holds them exactly.
@@ -176,7 +195,7 @@ def optimise_modification(drive: CycloidPin, errors: CycloidErrors | Mapping[str
         v1 = jax.nn.relu(m["lost_motion_max"] - hi_t) / ARCMIN
         v2 = jax.nn.relu(lo_t - m["lost_motion_min"]) / ARCMIN
         v3 = jax.nn.relu(c_t - (x[1] - x[0])) / 0.01
-        return -m["loaded_pairs_smooth"] + mu * (v1 ** 2 + v2 ** 2 + v3 ** 2)
+        return -m["loaded_pairs_smooth"] + mu * (v1**2 + v2**2 + v3**2)
 
     solver = optx.BFGS(rtol=1e-9, atol=1e-9)
 
@@ -186,7 +205,9 @@ def optimise_modification(drive: CycloidPin, errors: CycloidErrors | Mapping[str
         return sol.value, sol.result, sol.stats["num_steps"]
 
     m0 = drive.modification
-    x_init = np.array([float(m0.shift), float(m0.equidistant)] + ([float(m0.rotation) * float(drive.pin_circle_radius)] if rotation else []))
+    x_init = np.array(
+        [float(m0.shift), float(m0.equidistant)] + ([float(m0.rotation) * float(drive.pin_circle_radius)] if rotation else [])
+    )
     if starts is None:
         target = lm_hi if lm_lo == 0 else 0.5 * (lm_lo + lm_hi)
         start_list = [x_init, *_default_starts(drive, 0.9 * target if lm_lo == 0 else target, c_lo, rotation)]
@@ -206,10 +227,20 @@ def optimise_modification(drive: CycloidPin, errors: CycloidErrors | Mapping[str
             if bool(jnp.all(jnp.isfinite(x_new))):
                 x = x_new
         e = exact(np.asarray(x))
-        tried.append(ModificationStart(start=tuple(float(v) for v in x0), end=e.end, results=tuple(codes), steps=tuple(steps),
-                                       loaded_pairs_min=e.loaded_pairs_min, loaded_pairs_mean=e.loaded_pairs_mean,
-                                       lost_motion_max=e.lost_motion_max, lost_motion_min=e.lost_motion_min,
-                                       radial_clearance=e.radial_clearance, feasible=e.feasible))
+        tried.append(
+            ModificationStart(
+                start=tuple(float(v) for v in x0),
+                end=e.end,
+                results=tuple(codes),
+                steps=tuple(steps),
+                loaded_pairs_min=e.loaded_pairs_min,
+                loaded_pairs_mean=e.loaded_pairs_mean,
+                lost_motion_max=e.lost_motion_max,
+                lost_motion_min=e.lost_motion_min,
+                radial_clearance=e.radial_clearance,
+                feasible=e.feasible,
+            )
+        )
 
     def rank(s: ModificationStart):
         return (s.feasible, round(s.loaded_pairs_mean, 9), s.loaded_pairs_min, -s.lost_motion_max)
@@ -218,10 +249,19 @@ def optimise_modification(drive: CycloidPin, errors: CycloidErrors | Mapping[str
     init = exact(x_init)
     d_best = _with(drive, jnp.asarray(best.end, dtype=float), rotation)
     result: RESULTS = RESULTS.successful if best.feasible else RESULTS.infeasible  # pyright: ignore[reportAssignmentType]
-    sol = ModificationSolution(modification=d_best.modification, drive=d_best, loaded_pairs_min=best.loaded_pairs_min,
-                               loaded_pairs_mean=best.loaded_pairs_mean, lost_motion_max=best.lost_motion_max,
-                               lost_motion_min=best.lost_motion_min, radial_clearance=best.radial_clearance,
-                               feasible=best.feasible, starts=tuple(tried), initial=init, result=result)
+    sol = ModificationSolution(
+        modification=d_best.modification,
+        drive=d_best,
+        loaded_pairs_min=best.loaded_pairs_min,
+        loaded_pairs_mean=best.loaded_pairs_mean,
+        lost_motion_max=best.lost_motion_max,
+        lost_motion_min=best.lost_motion_min,
+        radial_clearance=best.radial_clearance,
+        feasible=best.feasible,
+        starts=tuple(tried),
+        initial=init,
+        result=result,
+    )
     check(result, throw=throw, what="optimise_modification")
     return sol
 
@@ -247,29 +287,45 @@ class ModificationSpec(eqx.Module):
     def from_table(cls, t: Table, drive: Any) -> ModificationSpec:
         """Read a ``[modification]`` table (the caller refuses unknown keys); `drive` must be a `CycloidPin`."""
         if not isinstance(drive, CycloidPin):
-            raise ConfigError(f"{t.where}: the profile-modification optimiser is for a cycloid-pin reducer "
-                              f"([drive] type = \"cycloid_pin\"), not {getattr(drive, 'type_name', type(drive).__name__)}")
+            raise ConfigError(
+                f"{t.where}: the profile-modification optimiser is for a cycloid-pin reducer "
+                f'([drive] type = "cycloid_pin"), not {getattr(drive, "type_name", type(drive).__name__)}'
+            )
         hi = t.number("lost_motion_max_arcmin", positive=True)
         lo = t.number("lost_motion_min_arcmin", 0.0, minimum=0)
         if not hi > lo:
             raise ConfigError(f"{t.where} lost_motion_max_arcmin: must exceed lost_motion_min_arcmin ({lo:g}′), got {hi:g}′")
-        return cls(lost_motion_max_arcmin=hi, lost_motion_min_arcmin=lo,
-                   radial_clearance_min_mm=t.number("radial_clearance_min_mm", 0.0, minimum=0),
-                   rotation=t.boolean("rotation", False), positions_per_pitch=t.integer("positions_per_pitch", 2, minimum=1))
+        return cls(
+            lost_motion_max_arcmin=hi,
+            lost_motion_min_arcmin=lo,
+            radial_clearance_min_mm=t.number("radial_clearance_min_mm", 0.0, minimum=0),
+            rotation=t.boolean("rotation", False),
+            positions_per_pitch=t.integer("positions_per_pitch", 2, minimum=1),
+        )
 
     def constraints(self) -> dict:
         """The spec as the summary's ``constraints`` entry."""
-        return {"lost_motion_max_arcmin": self.lost_motion_max_arcmin, "lost_motion_min_arcmin": self.lost_motion_min_arcmin,
-                "radial_clearance_min_mm": self.radial_clearance_min_mm, "rotation": self.rotation,
-                "positions_per_pitch": self.positions_per_pitch}
+        return {
+            "lost_motion_max_arcmin": self.lost_motion_max_arcmin,
+            "lost_motion_min_arcmin": self.lost_motion_min_arcmin,
+            "radial_clearance_min_mm": self.radial_clearance_min_mm,
+            "rotation": self.rotation,
+            "positions_per_pitch": self.positions_per_pitch,
+        }
 
     def solve(self, drive: CycloidPin, *, throw: bool = False) -> ModificationSolution:
         """Optimise the modification for the drive's reference reducer."""
         positions = revolution_angles(drive, self.positions_per_pitch, revolutions=drive.analysis.sweep_revolutions)
-        return optimise_modification(drive, drive.reference, lost_motion_max=self.lost_motion_max_arcmin / ARCMIN_PER_RAD,
-                                     lost_motion_min=self.lost_motion_min_arcmin / ARCMIN_PER_RAD,
-                                     radial_clearance_min=self.radial_clearance_min_mm, positions=positions,
-                                     rotation=self.rotation, throw=throw)
+        return optimise_modification(
+            drive,
+            drive.reference,
+            lost_motion_max=self.lost_motion_max_arcmin / ARCMIN_PER_RAD,
+            lost_motion_min=self.lost_motion_min_arcmin / ARCMIN_PER_RAD,
+            radial_clearance_min=self.radial_clearance_min_mm,
+            positions=positions,
+            rotation=self.rotation,
+            throw=throw,
+        )
 
 
 def modification_summary(drive: CycloidPin, spec: ModificationSpec, sol: ModificationSolution) -> dict:
@@ -277,11 +333,18 @@ def modification_summary(drive: CycloidPin, spec: ModificationSpec, sol: Modific
     R = float(drive.pin_circle_radius)
 
     def row(end, s, results=(), steps=()):
-        r = {"shift_mm": end[0], "equidistant_mm": end[1], "wheel_pin_circle_radius_mm": R + end[0],
-             "wheel_pin_radius_mm": float(drive.pin_radius) + end[1],
-             "loaded_pairs_min": s.loaded_pairs_min, "loaded_pairs_mean": s.loaded_pairs_mean,
-             "lost_motion_max_arcmin": s.lost_motion_max * ARCMIN_PER_RAD, "lost_motion_min_arcmin": s.lost_motion_min * ARCMIN_PER_RAD,
-             "radial_clearance_mm": s.radial_clearance, "feasible": s.feasible}
+        r = {
+            "shift_mm": end[0],
+            "equidistant_mm": end[1],
+            "wheel_pin_circle_radius_mm": R + end[0],
+            "wheel_pin_radius_mm": float(drive.pin_radius) + end[1],
+            "loaded_pairs_min": s.loaded_pairs_min,
+            "loaded_pairs_mean": s.loaded_pairs_mean,
+            "lost_motion_max_arcmin": s.lost_motion_max * ARCMIN_PER_RAD,
+            "lost_motion_min_arcmin": s.lost_motion_min * ARCMIN_PER_RAD,
+            "radial_clearance_mm": s.radial_clearance,
+            "feasible": s.feasible,
+        }
         if len(end) > 2:
             r["rotation_arcsec"] = end[2] / R * ARCSEC_PER_RAD
         if results:
@@ -291,28 +354,45 @@ def modification_summary(drive: CycloidPin, spec: ModificationSpec, sol: Modific
 
     m = sol.modification
     best_end = [float(m.shift), float(m.equidistant)] + ([float(m.rotation) * R] if spec.rotation else [])
-    return {"constraints": spec.constraints(), "best": row(best_end, sol), "initial": row(list(sol.initial.end), sol.initial),
-            "starts": [row(list(s.end), s, s.results, s.steps) | {"start": list(s.start)} for s in sol.starts],
-            "result": result_name(sol.result)}
+    return {
+        "constraints": spec.constraints(),
+        "best": row(best_end, sol),
+        "initial": row(list(sol.initial.end), sol.initial),
+        "starts": [row(list(s.end), s, s.results, s.steps) | {"start": list(s.start)} for s in sol.starts],
+        "result": result_name(sol.result),
+    }
 
 
 def modification_report(drive: CycloidPin, entry: dict) -> list[str]:
     """The report section of ``optimised_modification`` (Markdown lines)."""
     c = entry["constraints"]
-    L = ["", "## Optimised modification", "",
-         f"Maximise the loaded pairs (budget {drive.analysis.budget_mm:g} mm) with the lost motion in "
-         f"[{c['lost_motion_min_arcmin']:g}′, {c['lost_motion_max_arcmin']:g}′] and a radial clearance ≥ {c['radial_clearance_min_mm']:g} mm, "
-         f"for the reducer analysed; exact counts over the revolution ({c['positions_per_pitch']} positions per pitch).", "",
-         "| | R_Z (mm) | r_Z (mm) | loaded pairs mean (min) | lost motion (′) | radial clearance (mm) | feasible |",
-         "|---|---|---|---|---|---|---|"]
+    L = [
+        "",
+        "## Optimised modification",
+        "",
+        f"Maximise the loaded pairs (budget {drive.analysis.budget_mm:g} mm) with the lost motion in "
+        f"[{c['lost_motion_min_arcmin']:g}′, {c['lost_motion_max_arcmin']:g}′] and a radial clearance ≥ {c['radial_clearance_min_mm']:g} mm, "
+        f"for the reducer analysed; exact counts over the revolution ({c['positions_per_pitch']} positions per pitch).",
+        "",
+        "| | R_Z (mm) | r_Z (mm) | loaded pairs mean (min) | lost motion (′) | radial clearance (mm) | feasible |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for label, r in (("as designed", entry["initial"]), ("optimised", entry["best"])):
-        L.append(f"| {label} | {r['wheel_pin_circle_radius_mm']:.4f} | {r['wheel_pin_radius_mm']:.4f} | {r['loaded_pairs_mean']:.2f} "
-                 f"({r['loaded_pairs_min']}) | {r['lost_motion_min_arcmin']:.2f} … {r['lost_motion_max_arcmin']:.2f} | "
-                 f"{r['radial_clearance_mm']:.4f} | {'yes' if r['feasible'] else 'no'} |")
+        L.append(
+            f"| {label} | {r['wheel_pin_circle_radius_mm']:.4f} | {r['wheel_pin_radius_mm']:.4f} | {r['loaded_pairs_mean']:.2f} "
+            f"({r['loaded_pairs_min']}) | {r['lost_motion_min_arcmin']:.2f} … {r['lost_motion_max_arcmin']:.2f} | "
+            f"{r['radial_clearance_mm']:.4f} | {'yes' if r['feasible'] else 'no'} |"
+        )
     if entry["result"] != "successful":
         L += ["", "No start met the constraints: the best infeasible one is shown (loosen the spec)."]
     return [*L, ""]
 
 
-__all__ = ("ModificationSolution", "ModificationSpec", "ModificationStart", "modification_report", "modification_summary",
-           "optimise_modification")
+__all__ = (
+    "ModificationSolution",
+    "ModificationSpec",
+    "ModificationStart",
+    "modification_report",
+    "modification_summary",
+    "optimise_modification",
+)

@@ -36,10 +36,18 @@ class SensitivityTable(eqx.Module):
         """One dict per source: tolerance_um, contribution_rad, share, sobol_first_order_sum,
         sobol_closed_first_order, sobol_total_order."""
         s = self.sobol
-        return [{"source": n, "tolerance_um": self.tolerances[n], "contribution_rad": self.contribution[n],
-                 "share": self.contribution[n] / self.statistic if self.statistic else float("nan"),
-                 "sobol_first_order_sum": s.source_first_order_sum[n], "sobol_closed_first_order": s.source_closed_first_order[n],
-                 "sobol_total_order": s.source_total_order[n]} for n in self.sources]
+        return [
+            {
+                "source": n,
+                "tolerance_um": self.tolerances[n],
+                "contribution_rad": self.contribution[n],
+                "share": self.contribution[n] / self.statistic if self.statistic else float("nan"),
+                "sobol_first_order_sum": s.source_first_order_sum[n],
+                "sobol_closed_first_order": s.source_closed_first_order[n],
+                "sobol_total_order": s.source_total_order[n],
+            }
+            for n in self.sources
+        ]
 
     def to_dict(self) -> dict:
         return {"statistic_rad": self.statistic, "rows": self.rows(), "sobol": self.sobol.to_dict()}
@@ -49,14 +57,18 @@ class SensitivityTable(eqx.Module):
         sym = UNIT_SYMBOLS.get(unit)
         if sym is None:
             raise ValueError(f"unit: one of {sorted(UNIT_SYMBOLS)}, got {unit!r}")
-        head = (f"{'source':22s} {'T (µm)':>8s} {'∂stat/∂T·T':>12s} {'share':>7s} {'ΣS_i':>7s} {'S_clo':>7s} {'S_T':>7s}")
+        head = f"{'source':22s} {'T (µm)':>8s} {'∂stat/∂T·T':>12s} {'share':>7s} {'ΣS_i':>7s} {'S_clo':>7s} {'S_T':>7s}"
         lines = [head, "-" * len(head)]
         for r in self.rows():
             c = float(angle_from_rad(r["contribution_rad"], unit))
-            lines.append(f"{r['source']:22s} {r['tolerance_um']:8.3g} {c:10.2f}{sym:2s} {r['share']:7.1%} "
-                         f"{r['sobol_first_order_sum']:7.3f} {r['sobol_closed_first_order']:7.3f} {r['sobol_total_order']:7.3f}")
-        lines.append(f"{'sum':22s} {'':>8s} {float(angle_from_rad(self.statistic, unit)):10.2f}{sym:2s} {'':>7s} "
-                     f"{sum(self.sobol.source_first_order_sum.values()):7.3f}")
+            lines.append(
+                f"{r['source']:22s} {r['tolerance_um']:8.3g} {c:10.2f}{sym:2s} {r['share']:7.1%} "
+                f"{r['sobol_first_order_sum']:7.3f} {r['sobol_closed_first_order']:7.3f} {r['sobol_total_order']:7.3f}"
+            )
+        lines.append(
+            f"{'sum':22s} {'':>8s} {float(angle_from_rad(self.statistic, unit)):10.2f}{sym:2s} {'':>7s} "
+            f"{sum(self.sobol.source_first_order_sum.values()):7.3f}"
+        )
         return "\n".join(lines)
 
 
@@ -105,8 +117,11 @@ def _check_tolerances(p: BudgetProblem, tolerances) -> dict[str, float]:
     missing = [n for n in p.names if n not in tolerances]
     extra = [n for n in tolerances if n not in p.names]
     if missing or extra:
-        raise ValueError(f"tolerances: give one tolerance (µm) per error source {p.names}"
-                         + (f"; missing {missing}" if missing else "") + (f"; unknown {extra}" if extra else ""))
+        raise ValueError(
+            f"tolerances: give one tolerance (µm) per error source {p.names}"
+            + (f"; missing {missing}" if missing else "")
+            + (f"; unknown {extra}" if extra else "")
+        )
     out = {}
     for n in p.names:
         try:

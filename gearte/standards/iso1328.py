@@ -130,8 +130,7 @@ def _whole_grade(grade, standard: str) -> int:
         except (TypeError, ValueError):
             raise ValueError(f"grade: expected a whole number from {lo} to {hi}, got {grade!r}") from None
         if not (math.isfinite(g) and g.is_integer()):
-            raise ValueError(f"grade: ISO {standard} has whole grades only, got {grade!r}; "
-                             "use `iso1328_tolerance` for a continuous grade")
+            raise ValueError(f"grade: ISO {standard} has whole grades only, got {grade!r}; use `iso1328_tolerance` for a continuous grade")
         q = int(g)
     if not lo <= q <= hi:
         raise ValueError(f"grade {q} is outside ISO {standard}'s grades {lo} (finest) to {hi} (coarsest)")
@@ -372,8 +371,9 @@ def nearest_grade(
         if round_tolerance(base * 2.0 ** ((q - 5) / 2.0)) <= v:
             return q
     finest = round_tolerance(base * 2.0 ** ((lo - 5) / 2.0))
-    raise ValueError(f"{quantity} ≤ {v:g} µm is finer than ISO {standard}'s finest grade {lo} "
-                     f"({finest:g} µm for this gear); no grade meets it")
+    raise ValueError(
+        f"{quantity} ≤ {v:g} µm is finer than ISO {standard}'s finest grade {lo} ({finest:g} µm for this gear); no grade meets it"
+    )
 
 
 def eccentricity_from_runout(F_r_um: ArrayLike) -> Float[Array, ...]:

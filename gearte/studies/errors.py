@@ -62,8 +62,10 @@ def order_sources(sources: Mapping[str, ErrorSource]) -> list[str]:
         ref = rule.reference if isinstance(rule, AbstractRule) else None
         if ref is not None:
             if ref not in sources:
-                raise ValueError(f"error source {name!r}: its phase rule refers to {ref!r}, which is not an error source here; "
-                                 f"use one of {sorted(sources)}")
+                raise ValueError(
+                    f"error source {name!r}: its phase rule refers to {ref!r}, which is not an error source here; "
+                    f"use one of {sorted(sources)}"
+                )
             visit(ref, chain + (name,))
         state[name] = 2
         done.append(name)
@@ -103,8 +105,10 @@ class ErrorModel(eqx.Module):
                 # A bounded law reaching below 0 is a mistake; a Normal magnitude (unbounded) is allowed:
                 # its negative draws are magnitudes with the phase turned by π.
                 if isinstance(src.magnitude, AbstractValueLaw) and -math.inf < src.magnitude.lower() < 0:
-                    raise ValueError(f"error source {n!r}: its magnitude law ({src.magnitude.describe()}) can draw negative values; "
-                                     "a magnitude cannot be negative (turn its phase by π instead)")
+                    raise ValueError(
+                        f"error source {n!r}: its magnitude law ({src.magnitude.describe()}) can draw negative values; "
+                        "a magnitude cannot be negative (turn its phase by π instead)"
+                    )
             elif src.phase is not None:
                 raise ValueError(f"error source {n!r} is a signed deviation ({spec.unit}); it has no phase law")
         self.sources = {n: sources[n] for n in specs}
@@ -113,8 +117,10 @@ class ErrorModel(eqx.Module):
         for n in self.order:
             rule = self.sources[n].phase
             if isinstance(rule, RelativePhase) and self.specs[rule.to].count not in (1, self.specs[n].count):
-                raise ValueError(f"error source {n!r} ({self.specs[n].count} instances) cannot follow the phase of {rule.to!r} "
-                                 f"({self.specs[rule.to].count} instances)")
+                raise ValueError(
+                    f"error source {n!r} ({self.specs[n].count} instances) cannot follow the phase of {rule.to!r} "
+                    f"({self.specs[rule.to].count} instances)"
+                )
 
     @property
     def counts(self) -> dict[str, int]:

@@ -249,8 +249,10 @@ class TruncatedNormal(AbstractValueLaw):
         return jnp.zeros(())
 
     def describe(self, unit: str = "µm") -> str:
-        return (f"normal (mean {format_value(float(self.mean), unit)}, std {format_value(float(self.std), unit)}) truncated to "
-                f"[{format_value(float(self.low), unit)}, {format_value(float(self.high), unit)}]")
+        return (
+            f"normal (mean {format_value(float(self.mean), unit)}, std {format_value(float(self.std), unit)}) truncated to "
+            f"[{format_value(float(self.low), unit)}, {format_value(float(self.high), unit)}]"
+        )
 
 
 class Rayleigh(AbstractValueLaw):
@@ -376,8 +378,10 @@ class Optimised(AbstractRule):
         return self.to
 
     def sample(self, key, shape):
-        raise ValueError("Optimised: this phase is to be chosen by the allocation optimiser; resolve the rule first "
-                         "(gearte.allocate_rule, or a study file's [allocation])")
+        raise ValueError(
+            "Optimised: this phase is to be chosen by the allocation optimiser; resolve the rule first "
+            "(gearte.allocate_rule, or a study file's [allocation])"
+        )
 
     def describe(self, unit: str = "rad") -> str:
         return "chosen by the allocation optimiser" + (f" (offset from the phase of {self.to})" if self.to else " (absolute)")

@@ -73,7 +73,7 @@ class TEStudy(eqx.Module):
         offered = drive.metrics
         if metric is None:
             metric = next(iter(offered.values()))
-        for m in (metric if isinstance(metric, tuple) else (metric,)):
+        for m in metric if isinstance(metric, tuple) else (metric,):
             if not isinstance(m, AbstractMetric):
                 raise ValueError(f"metric: expected a metric object such as gearte.Peak(), got {m!r}")
             if m.name not in offered or type(offered[m.name]) is not type(m):
@@ -196,8 +196,7 @@ def monte_carlo(
                 bar.update(min(chunk, n_samples - start))
     # One array, or a pytree of them when `fn` returns several outputs per sample.
     values = jax.tree.map(lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:n_samples], *parts)
-    return MonteCarloResult(values=values, n_samples=int(n_samples), chunk_size=chunk, block_size=block,
-                            seconds=time.perf_counter() - t0)
+    return MonteCarloResult(values=values, n_samples=int(n_samples), chunk_size=chunk, block_size=block, seconds=time.perf_counter() - t0)
 
 
 class Statistics(eqx.Module):
@@ -212,8 +211,15 @@ class Statistics(eqx.Module):
     unit: str
 
     def to_dict(self) -> dict:
-        return {"unit": self.unit, "n": self.n, "min": self.min, "max": self.max, "mean": self.mean,
-                "std": self.std, "percentiles": dict(self.percentiles)}
+        return {
+            "unit": self.unit,
+            "n": self.n,
+            "min": self.min,
+            "max": self.max,
+            "mean": self.mean,
+            "std": self.std,
+            "percentiles": dict(self.percentiles),
+        }
 
 
 def _pct_key(p: float) -> str:
@@ -228,6 +234,12 @@ def statistics(values, *, unit: str = "rad") -> Statistics:
     if not np.all(np.isfinite(v)):
         raise ValueError(f"statistics: {np.count_nonzero(~np.isfinite(v))} non-finite values")
     pct = np.percentile(v, PERCENTILES)
-    return Statistics(n=int(v.size), min=float(v.min()), max=float(v.max()), mean=float(v.mean()),
-                      std=float(v.std(ddof=1)) if v.size > 1 else 0.0,
-                      percentiles={_pct_key(p): float(x) for p, x in zip(PERCENTILES, pct)}, unit=unit)
+    return Statistics(
+        n=int(v.size),
+        min=float(v.min()),
+        max=float(v.max()),
+        mean=float(v.mean()),
+        std=float(v.std(ddof=1)) if v.size > 1 else 0.0,
+        percentiles={_pct_key(p): float(x) for p, x in zip(PERCENTILES, pct)},
+        unit=unit,
+    )

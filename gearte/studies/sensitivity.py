@@ -117,14 +117,20 @@ def _plan(drive: AbstractDrive, model: ErrorModel, scale: Mapping[str, float], m
         rule = src.phase
         kind = "magnitude" if spec.kind == "eccentricity" else "value"
         if isinstance(rule, Optimised):
-            raise ValueError(f"error source {name!r}: its phase is to be chosen by the allocation optimiser; resolve the "
-                             "rule first (gearte.allocate_rule, then a RelativePhase or FixedPhase)")
+            raise ValueError(
+                f"error source {name!r}: its phase is to be chosen by the allocation optimiser; resolve the "
+                "rule first (gearte.allocate_rule, then a RelativePhase or FixedPhase)"
+            )
         if rule is not None and not isinstance(rule, (UniformPhase, RelativePhase, FixedPhase)):
-            raise ValueError(f"error source {name!r}: phase law {type(rule).__name__} is not supported for Sobol' indices; "
-                             "use UniformPhase (an input), FixedPhase or RelativePhase (rules, not inputs)")
+            raise ValueError(
+                f"error source {name!r}: phase law {type(rule).__name__} is not supported for Sobol' indices; "
+                "use UniformPhase (an input), FixedPhase or RelativePhase (rules, not inputs)"
+            )
         if not isinstance(src.magnitude, AbstractValueLaw):
-            raise ValueError(f"error source {name!r}: its law ({type(src.magnitude).__name__}) has no inverse CDF for Sobol' "
-                             "indices; use Fixed, Uniform, Normal, TruncatedNormal or Rayleigh")
+            raise ValueError(
+                f"error source {name!r}: its law ({type(src.magnitude).__name__}) has no inverse CDF for Sobol' "
+                "indices; use Fixed, Uniform, Normal, TruncatedNormal or Rayleigh"
+            )
         if src.magnitude.is_random():
             val_cols = tuple(range(len(labels), len(labels) + c))
             for i in range(c):
@@ -142,8 +148,9 @@ def _plan(drive: AbstractDrive, model: ErrorModel, scale: Mapping[str, float], m
         else:
             ph_cols = ()
         columns.append((name, val_cols, ph_cols))
-    plan = _Plan(drive=drive, model=model, scale={n: jnp.asarray(float(scale[n])) for n in model.specs}, metric=metric,
-                 columns=tuple(columns))
+    plan = _Plan(
+        drive=drive, model=model, scale={n: jnp.asarray(float(scale[n])) for n in model.specs}, metric=metric, columns=tuple(columns)
+    )
     return tuple(labels), tuple(owners), tuple(kinds), plan
 
 
@@ -195,27 +202,43 @@ class SobolIndices(eqx.Module):
         """Plain Python (JSON-ready) form: per-input and per-source indices, mean (rad), variance (rad²)."""
         per_input = {}
         for j, label in enumerate(self.inputs):
-            row = {"source": self.input_source[j], "kind": self.input_kind[j], "first_order": float(self.first_order[j]),
-                   "total_order": float(self.total_order[j])}
+            row = {
+                "source": self.input_source[j],
+                "kind": self.input_kind[j],
+                "first_order": float(self.first_order[j]),
+                "total_order": float(self.total_order[j]),
+            }
             if self.first_order_ci is not None and self.total_order_ci is not None:
                 row["first_order_ci"] = [float(x) for x in self.first_order_ci[j]]
                 row["total_order_ci"] = [float(x) for x in self.total_order_ci[j]]
             per_input[label] = row
-        per_source = {n: {"first_order_sum": self.source_first_order_sum[n], "closed_first_order": self.source_closed_first_order[n],
-                          "total_order": self.source_total_order[n],
-                          "inputs": [lab for lab, s in zip(self.inputs, self.input_source) if s == n]}
-                      for n in self.sources}
-        return {"metric": self.metric, "mean_rad": self.mean, "variance_rad2": self.variance, "n": self.n,
-                "evaluations": self.evaluations, "confidence_level": self.confidence_level,
-                "inputs": per_input, "sources": per_source,
-                "definitions": {
-                    "first_order": "S_i = V[E(Y|X_i)]/V[Y]",
-                    "total_order": "S_Ti = 1 − V[E(Y|X_~i)]/V[Y]",
-                    "first_order_sum": "Σ of the source's inputs' S_i: a lower bound of its closed first-order index",
-                    "closed_first_order": "S^clo_u = V[E(Y|X_u)]/V[Y], all the source's inputs together",
-                    "total_order (source)": "S^T_u = 1 − V[E(Y|X_~u)]/V[Y]",
-                    "estimator": "scipy.stats.sobol_indices (Saltelli 2010 first order, Jansen total) on a scrambled Sobol' design",
-                }}
+        per_source = {
+            n: {
+                "first_order_sum": self.source_first_order_sum[n],
+                "closed_first_order": self.source_closed_first_order[n],
+                "total_order": self.source_total_order[n],
+                "inputs": [lab for lab, s in zip(self.inputs, self.input_source) if s == n],
+            }
+            for n in self.sources
+        }
+        return {
+            "metric": self.metric,
+            "mean_rad": self.mean,
+            "variance_rad2": self.variance,
+            "n": self.n,
+            "evaluations": self.evaluations,
+            "confidence_level": self.confidence_level,
+            "inputs": per_input,
+            "sources": per_source,
+            "definitions": {
+                "first_order": "S_i = V[E(Y|X_i)]/V[Y]",
+                "total_order": "S_Ti = 1 − V[E(Y|X_~i)]/V[Y]",
+                "first_order_sum": "Σ of the source's inputs' S_i: a lower bound of its closed first-order index",
+                "closed_first_order": "S^clo_u = V[E(Y|X_u)]/V[Y], all the source's inputs together",
+                "total_order (source)": "S^T_u = 1 − V[E(Y|X_~u)]/V[Y]",
+                "estimator": "scipy.stats.sobol_indices (Saltelli 2010 first order, Jansen total) on a scrambled Sobol' design",
+            },
+        }
 
 
 # ------------------------------------------------------------------ main entry
@@ -249,7 +272,7 @@ def _evaluate(plan: _Plan, rows: np.ndarray, block: int) -> np.ndarray:
     block = min(block, m)
     out = []
     for s in range(0, m, block):
-        part = rows[s:s + block]
+        part = rows[s : s + block]
         k = part.shape[0]
         if k < block:
             part = np.concatenate([part, np.full((block - k, rows.shape[1]), 0.5)])
@@ -310,8 +333,10 @@ def sobol_indices(
     labels, owners, kinds, plan = _plan(drive, model, factors, metric)
     d = len(labels)
     if d == 0:
-        raise ValueError("the error model has no random input: every magnitude is constant and every phase is fixed "
-                         "or set by a rule, so the TE does not vary")
+        raise ValueError(
+            "the error model has no random input: every magnitude is constant and every phase is fixed "
+            "or set by a rule, so the TE does not vary"
+        )
     groups = [s for s in model.specs if s in owners]
     A, B = _sobol_design(stats, n, d, _numpy_rng(key))
     pages = []
@@ -327,10 +352,11 @@ def sobol_indices(
     rows = np.concatenate([A, B] + pages)
     y = _evaluate(plan, rows, int(block_size))
     if not np.all(np.isfinite(y)):
-        raise ValueError(f"the TE metric is not finite for {int(np.count_nonzero(~np.isfinite(y)))} of {y.size} samples; "
-                         "check the magnitude laws")
-    f_A, f_B = y[:n][None, :], y[n:2 * n][None, :]
-    f_pages = y[2 * n:].reshape(d + len(groups), 1, n)
+        raise ValueError(
+            f"the TE metric is not finite for {int(np.count_nonzero(~np.isfinite(y)))} of {y.size} samples; check the magnitude laws"
+        )
+    f_A, f_B = y[:n][None, :], y[n : 2 * n][None, :]
+    f_pages = y[2 * n :].reshape(d + len(groups), 1, n)
     per_input, s1, st = _scipy_indices(stats, f_A, f_B, f_pages[:d], n)
     _, g1, gt = _scipy_indices(stats, f_A, f_B, f_pages[d:], n)
     ci1 = cit = None
@@ -341,11 +367,24 @@ def sobol_indices(
     closed = {s: float(g1[groups.index(s)]) if s in groups else 0.0 for s in names}
     total = {s: float(gt[groups.index(s)]) if s in groups else 0.0 for s in names}
     both = np.concatenate([f_A[0], f_B[0]])
-    return SobolIndices(inputs=labels, input_source=owners, input_kind=kinds, first_order=s1, total_order=st,
-                        first_order_ci=ci1, total_order_ci=cit, source_first_order_sum=first_sum,
-                        source_closed_first_order=closed, source_total_order=total, mean=float(np.mean(both)),
-                        variance=float(np.var(both)), n=n, evaluations=int(y.size), metric=metric.name,
-                        confidence_level=None if confidence_level is None else float(confidence_level))
+    return SobolIndices(
+        inputs=labels,
+        input_source=owners,
+        input_kind=kinds,
+        first_order=s1,
+        total_order=st,
+        first_order_ci=ci1,
+        total_order_ci=cit,
+        source_first_order_sum=first_sum,
+        source_closed_first_order=closed,
+        source_total_order=total,
+        mean=float(np.mean(both)),
+        variance=float(np.var(both)),
+        n=n,
+        evaluations=int(y.size),
+        metric=metric.name,
+        confidence_level=None if confidence_level is None else float(confidence_level),
+    )
 
 
 def _scipy_indices(stats, f_A, f_B, f_AB, n: int):

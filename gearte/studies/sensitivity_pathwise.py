@@ -48,8 +48,15 @@ class PathwiseSensitivity(eqx.Module):
     n_samples: int = eqx.field(static=True)
 
 
-def pathwise_sensitivities(drive: AbstractDrive, model: ErrorModel, metrics: AbstractMetric | Sequence[AbstractMetric], *,
-                           key: int | PRNGKeyArray, n_samples: int = 256, chunk: int = 64) -> dict[str, PathwiseSensitivity]:
+def pathwise_sensitivities(
+    drive: AbstractDrive,
+    model: ErrorModel,
+    metrics: AbstractMetric | Sequence[AbstractMetric],
+    *,
+    key: int | PRNGKeyArray,
+    n_samples: int = 256,
+    chunk: int = 64,
+) -> dict[str, PathwiseSensitivity]:
     """∂ mean(metric)/∂(law parameter) over `n_samples` samples, pathwise, for every metric and every parameter.
 
     **Arguments:**
@@ -166,8 +173,9 @@ def _metric_unit(metric: AbstractMetric, unit: str) -> tuple[str, float]:
     return u, float(angle_from_rad(1.0, u))
 
 
-def pathwise_summary(result: Mapping[str, PathwiseSensitivity], model: ErrorModel, metrics: Mapping[str, AbstractMetric], *,
-                     unit: str = "arcsec") -> dict:
+def pathwise_summary(
+    result: Mapping[str, PathwiseSensitivity], model: ErrorModel, metrics: Mapping[str, AbstractMetric], *, unit: str = "arcsec"
+) -> dict:
     """The summary entry of pathwise sensitivities: per metric its mean and the derivatives per µm (lengths) or per ″
     (angles). Angular metrics are in the metric's own report unit if it has one (``report_unit``), else in `unit`."""
     n = next(iter(result.values())).n_samples
@@ -188,12 +196,20 @@ def pathwise_report(entry: dict) -> list[str]:
     if not names:
         return []
     head = " | ".join(f"d mean {n} ({UNIT_SYMBOLS.get(entry[n]['unit'], entry[n]['unit'])} per)" for n in names)
-    L = ["", "## Sensitivity of the Monte Carlo means to the error laws", "",
-         f"Pathwise derivatives over {entry['samples']:,} samples (the study's first samples, random numbers held): "
-         "mean of the per-sample gradient of each metric's smooth value.", "",
-         "| | " + " | ".join(f"{n}" for n in names) + " |", "|---" * (len(names) + 1) + "|",
-         "| mean | " + " | ".join(f"{entry[n]['mean']:.4g} {entry[n]['unit']}" for n in names) + " |", "",
-         f"| parameter | {head} |", "|---" * (len(names) + 1) + "|"]
+    L = [
+        "",
+        "## Sensitivity of the Monte Carlo means to the error laws",
+        "",
+        f"Pathwise derivatives over {entry['samples']:,} samples (the study's first samples, random numbers held): "
+        "mean of the per-sample gradient of each metric's smooth value.",
+        "",
+        "| | " + " | ".join(f"{n}" for n in names) + " |",
+        "|---" * (len(names) + 1) + "|",
+        "| mean | " + " | ".join(f"{entry[n]['mean']:.4g} {entry[n]['unit']}" for n in names) + " |",
+        "",
+        f"| parameter | {head} |",
+        "|---" * (len(names) + 1) + "|",
+    ]
     for key in entry[names[0]]["derivatives"]:
         cells = [entry[n]["derivatives"][key] for n in names]
         L.append(f"| {key} (per {cells[0]['per']}) | " + " | ".join(f"{c['value']:.4g}" for c in cells) + " |")
