@@ -1,4 +1,4 @@
-"""Assembly-phase allocation: known optima, independent re-evaluation, the seed's rule, study files."""
+"""Assembly-phase allocation: known optima, independent re-evaluation, the paper's rule, study files."""
 
 import json
 import math

@@ -119,7 +119,7 @@ def test_closed_forms():
     a1, a2, p1, p2 = 5.0, 3.0, 0.2, 2.5
     s2 = make([a1, a2], [p1, p2], [2, 2])
     np.testing.assert_allclose(gearte.peak(s2), abs(a1 * np.exp(1j * p1) + a2 * np.exp(1j * p2)), rtol=1e-12)
-    # π apart: |A1 − A2| (seed 000, sec. 1).
+    # π apart: |A1 − A2| (Wang et al. 2013, sec. 1).
     np.testing.assert_allclose(gearte.peak(make([a1, a2], [0.4, 0.4 + math.pi], [2, 2])), a1 - a2, rtol=1e-12)
     # A constant is part of the peak (it is "max |Δθ|"), not of the peak-to-peak.
     s3 = make([a, 2.0], [phi, math.pi / 2], [1, 0])

@@ -1,4 +1,4 @@
-"""2K-H planetary model: kinematics, seed 000's eq. (9), allocation, coupling modes, validation."""
+"""2K-H planetary model: kinematics, Wang et al.'s (2013) eq. (9), allocation, coupling modes, validation."""
 
 import math
 from fractions import Fraction
@@ -19,7 +19,7 @@ SOURCES = list(wang2013.TABLE1_TOLERANCES_UM)
 
 
 def eq9_numpy(theta, E, ph, planet_freq):
-    """Seed 000, eq. (9), typed in from the paper (rad); θ = input angle. E, ph: dicts by symbol."""
+    """Wang et al. (2013), eq. (9), typed in from the paper (rad); θ = input angle. E, ph: dicts by symbol."""
     pre = -1.0 / (48000.0 * math.cos(PI / 9))
     t = np.asarray(theta)
     return pre * (
@@ -144,7 +144,7 @@ def test_table3_allocation_group_amplitudes():
 
 def test_allocated_te_estimate_and_exact_peak():
     k_arcsec = ARCSEC / (48000 * math.cos(PI / 9))
-    # The seed's sum-of-amplitudes estimate: (13 + 4.81 + 10.94) µm → 131.5″.
+    # Wang et al.'s sum-of-amplitudes estimate: (13 + 4.81 + 10.94) µm → 131.5″.
     # Table 3 with β_r = 0 puts eq. (9)'s ω_s/8 terms at π/9 (A_s), −π and −7π/9 (A_c), π/9 (E_r).
     group = abs((12 + 21) * np.exp(1j * PI / 9) + 15 * np.exp(-1j * PI) + 15 * np.exp(-7j * PI / 9))
     assert round(group, 2) == 4.81
