@@ -63,16 +63,15 @@ from .drives import (
     SourceSpec as SourceSpec,
 )
 from .optimise.allocation import (
-    MeasuredAllocation as MeasuredAllocation,
     RuleAllocation as RuleAllocation,
     RuleProblem as RuleProblem,
-    allocate_measured as allocate_measured,
     allocate_rule as allocate_rule,
     evaluate_rule as evaluate_rule,
     expected as expected,
     rule_problem as rule_problem,
     worst_case as worst_case,
 )
+from .optimise.allocation_measured import MeasuredAllocation as MeasuredAllocation, allocate_measured as allocate_measured
 from .optimise.budget import (
     BudgetProblem as BudgetProblem,
     BudgetResult as BudgetResult,

@@ -1,4 +1,5 @@
-"""Assembly-phase allocation: choose how parts are turned at assembly to cut the TE.
+"""Assembly-phase allocation: choose how parts are turned at assembly to cut the TE (rules here; measured parts
+in `allocation_measured`).
 
 Two situations (Wang et al. 2013, sections 1 and 3):
 
@@ -40,7 +41,7 @@ from ..studies.laws import FixedPhase, RelativePhase, UniformPhase
 from ..studies.montecarlo import as_key, monte_carlo
 
 
-def _starts_result(results, best) -> tuple[int, Any]:
+def starts_result(results, best) -> tuple[int, Any]:
     """How many starts succeeded, and the result code of the solve: that of the best start, or
     `some_starts_failed` when it succeeded but others did not (reported, not hidden)."""
     ok = np.asarray(results == optx.RESULTS.successful)
@@ -50,12 +51,12 @@ def _starts_result(results, best) -> tuple[int, Any]:
     return int(ok.sum()), RESULTS.successful if ok.all() else RESULTS.some_starts_failed
 
 
-def _partial(result) -> bool:
+def partial_success(result) -> bool:
     """Whether the best start succeeded but some others did not (reported, not raised)."""
     return bool(result == RESULTS.some_starts_failed)
 
 
-def _check_drive(drive) -> None:
+def check_phase_drive(drive) -> None:
     if not isinstance(drive, AbstractSinusoidalDrive):
         raise ValueError(
             f"assembly-phase allocation needs a drive whose TE is a sum of sinusoids with phases "
@@ -63,171 +64,9 @@ def _check_drive(drive) -> None:
         )
 
 
-def _check_metric(metric) -> None:
+def check_extremum_metric(metric) -> None:
     if not isinstance(metric, (Peak, PeakToPeak)):
         raise ValueError(f"metric: gearte.Peak() or gearte.PeakToPeak(), got {metric!r}")
-
-
-# ------------------------------------------------------------------ measured parts
-
-
-class MeasuredAllocation(eqx.Module):
-    """Result of `allocate_measured`.
-
-    `phases`: the chosen phase (rad) of every adjusted source; `te` and `te_before`: the
-    exact metric (rad) with the chosen and with the given phases; `result`: the solve's
-    `RESULTS` code; `starts`/`converged`: how many optimiser starts ran and how many reported
-    success; `enumerated`: whether the discrete optimum was verified by enumerating every
-    allowed combination.
-    """
-
-    phases: dict[str, Array]
-    te: Float[Array, ""]
-    te_before: Float[Array, ""]
-    result: RESULTS
-    metric: AbstractMetric
-    starts: int = eqx.field(static=True)
-    converged: int = eqx.field(static=True)
-    enumerated: bool = eqx.field(static=True)
-
-
-def _with_phases(errors: Mapping[str, Eccentricity], names: list[str], counts: list[int], y: Array) -> dict[str, Eccentricity]:
-    out = dict(errors)
-    i = 0
-    for n, c in zip(names, counts):
-        out[n] = Eccentricity(
-            jnp.broadcast_to(errors[n].magnitude, (c,)) if errors[n].magnitude.ndim else errors[n].magnitude,
-            y[i : i + c] if c > 1 else y[i],
-        )
-        i += c
-    return out
-
-
-def allocate_measured(
-    drive: AbstractSinusoidalDrive,
-    errors: Mapping[str, Eccentricity],
-    *,
-    adjust: Mapping[str, float | None],
-    key: int | PRNGKeyArray,
-    metric: AbstractMetric = Peak(),
-    starts: int = 16,
-    width: float | None = None,
-    max_steps: int = 200,
-    enumerate_limit: int = 20_000,
-    throw: bool = True,
-) -> MeasuredAllocation:
-    """Choose the phases of the `adjust` sources that minimise the exact TE metric.
-
-    **Arguments:**
-
-    - `drive`, `errors`: the drive and its measured errors (magnitudes µm, phases rad).
-    - `adjust`: source name → step (rad) between allowed assembly positions (e.g. 2π/z
-      for a gear turned by whole teeth, 2π/n for an n-bolt pattern), or None for any angle.
-      Allowed positions are the given (as-delivered) phase turned by whole steps.
-    - `key`: seed or key for the random starts.
-    - `metric`: `gearte.Peak()` or `gearte.PeakToPeak()`.
-    - `starts`: optimiser starts, run together under `vmap`.
-    - `width`: smoothing width of the surrogate, rad (default 0.2 % of the starting metric).
-    - `enumerate_limit`: with discrete positions, enumerate every combination when there are
-      at most this many, which certifies the discrete optimum.
-    - `throw`: raise if the best start did not converge (else check `result`).
-
-    **Returns:** a `MeasuredAllocation`.
-    """
-    require_x64()
-    _check_drive(drive)
-    _check_metric(metric)
-    counts_all = {n: s.count for n, s in drive.error_sources.items()}
-    for n, step in adjust.items():
-        if n not in counts_all:
-            raise ValueError(f"adjust: {n!r} is not an error source of this drive; use one of {sorted(counts_all)}")
-        if step is not None and not (math.isfinite(step) and step > 0):
-            raise ValueError(f"adjust[{n!r}]: the step between positions must be > 0 rad, or None for any angle")
-    if not adjust:
-        raise ValueError("adjust: name at least one error source whose phase may be chosen")
-    errors = drive.checked(errors)
-    names = list(adjust)
-    counts = [counts_all[n] for n in names]
-    dim = sum(counts)
-    y_given = jnp.concatenate([errors[n].phase.reshape(-1) for n in names])
-
-    def exact(y):
-        return metric(drive, drive.signal(_with_phases(errors, names, counts, y)))
-
-    te_before = exact(y_given)
-    w = float(width) if width is not None else 2e-3 * max(float(te_before), 1e-12)
-
-    def surrogate(y, args):
-        sig = drive.signal(_with_phases(errors, names, counts, y))
-        if isinstance(metric, Peak):
-            return smooth_peak(sig, width=w) / w
-        # Peak-to-peak: smooth max of f plus smooth max of −f.
-        pos = smooth_peak(eqx.tree_at(lambda s: s.offset, sig, sig.offset + 1e3 * w), width=w)
-        return (pos - 1e3 * w + smooth_peak(sig, width=w)) / w
-
-    y0 = _TWO_PI * jax.random.uniform(as_key(key), (starts, dim), dtype=float)
-    y0 = y0.at[0].set(y_given)
-    solver = optx.BFGS(rtol=1e-8, atol=1e-8)
-    sol = jax.vmap(lambda s: optx.minimise(surrogate, solver, s, None, max_steps=max_steps, throw=False))(y0)
-    values = jax.vmap(exact)(sol.value)
-    best = jnp.argmin(values)
-    y_best, te_best = sol.value[best], values[best]
-
-    steps = [adjust[n] for n in names for _ in range(counts_all[n])]
-    enumerated = False
-    if any(s is not None for s in steps):
-        y_best, te_best, enumerated = _discrete(exact, y_best, y_given, steps, enumerate_limit)
-    phases, i = {}, 0
-    for n, c in zip(names, counts):
-        phases[n] = jnp.mod(y_best[i : i + c], _TWO_PI) if c > 1 else jnp.mod(y_best[i], _TWO_PI)
-        i += c
-    converged, result = _starts_result(sol.result, best)
-    check(result, throw=throw and not _partial(result), what="allocate_measured")
-    return MeasuredAllocation(
-        phases=phases,
-        te=te_best,
-        te_before=te_before,
-        result=result,
-        metric=metric,
-        starts=starts,
-        converged=converged,
-        enumerated=enumerated,
-    )
-
-
-def _discrete(exact, y_cont, y_given, steps, limit):
-    """Snap to allowed positions (the given phase turned by whole steps); enumerate all of them
-    when few enough, else search neighbours."""
-    grids = []
-    for y, y0, s in zip(np.asarray(y_cont), np.asarray(y_given), steps):
-        if s is None:
-            grids.append(np.array([y]))
-        else:
-            n = max(1, int(round(_TWO_PI / s)))
-            grids.append(y0 + np.arange(n) * (_TWO_PI / n))
-    total = int(np.prod([len(g) for g in grids]))
-    f = jax.jit(jax.vmap(exact))
-    if total <= limit:
-        mesh = np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, len(grids))
-        vals = np.concatenate([np.asarray(f(jnp.asarray(mesh[i : i + 4096]))) for i in range(0, total, 4096)])
-        i = int(np.argmin(vals))
-        return jnp.asarray(mesh[i]), jnp.asarray(vals[i]), True
-    # Too many combinations: round, then coordinate descent over neighbouring positions.
-    y = np.array([g[np.argmin(np.abs(np.angle(np.exp(1j * (g - v)))))] for g, v in zip(grids, np.asarray(y_cont))])
-    best = float(exact(jnp.asarray(y)))
-    improved = True
-    while improved:
-        improved = False
-        for j, s in enumerate(steps):
-            if s is None:
-                continue
-            for d in (-1, 1):
-                cand = y.copy()
-                cand[j] = (cand[j] + d * s) % _TWO_PI
-                v = float(exact(jnp.asarray(cand)))
-                if v < best - 1e-15:
-                    y, best, improved = cand, v, True
-    return jnp.asarray(y), jnp.asarray(best), False
 
 
 # ------------------------------------------------------------------ unmeasured parts: assembly rules
@@ -317,7 +156,7 @@ def rule_problem(
     - `datum`: the source whose (unknown) phase is the assembly datum, e.g. "ring_manufacturing" (β_r).
     - `tolerances`: µm per source: the magnitudes for the worst-case and expected objectives.
     """
-    _check_drive(drive)
+    check_phase_drive(drive)
     counts = model.counts
     for n, mode in adjust.items():
         if n not in counts:
@@ -540,9 +379,9 @@ def allocate_rule(
     best = jnp.argmin(scores)
     y_best = jnp.mod(sol.value[best], _TWO_PI)
     figures = evaluate_rule(p, y_best, key=k_check, n_check=n_check)
-    converged, result = _starts_result(sol.result, best)
+    converged, result = starts_result(sol.result, best)
     # The surrogate is smooth but flat along valleys: a start that stops there is still scored exactly.
-    check(result, throw=throw and not _partial(result), what="allocate_rule")
+    check(result, throw=throw and not partial_success(result), what="allocate_rule")
     return RuleAllocation(
         offsets={n: y_best[i] for i, n in enumerate(p.adjust)},
         worst_case=figures["worst_case"],
