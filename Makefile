@@ -34,7 +34,7 @@ lint: $(STAMP)
 	$(BIN)/basedpyright --level error
 
 test: lint
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_planetary_mc.py

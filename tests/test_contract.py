@@ -254,3 +254,46 @@ def test_scale_search_meets_the_constraint_and_its_gradient_matches_finite_diffe
         e = jnp.zeros(3).at[i].set(h)
         fd = (float(eqx.filter_jit(cost)(y + e)) - float(eqx.filter_jit(cost)(y - e))) / (2 * h)
         assert g[i] == pytest.approx(fd, rel=1e-4, abs=1e-8)
+
+
+def test_a_budget_scales_each_law_as_its_draws_are_scaled():
+    """The study at a budget's tolerances (each law `scaled`, as `gearte run` continues with it) draws exactly what
+    the budget's common random numbers gave at those tolerances: a band about its centre, a magnitude and a
+    sinusoidal pattern about 0."""
+    import tomllib
+
+    from gearte.optimise import budget as gb
+
+    text = toy_drive.STUDY + (
+        '\n[errors.spacing]\ntolerance_um = 5\nvalue = { law = "sinusoid", amplitude = { law = "uniform", low_um = 0, '
+        'high_um = 5 }, phase = "uniform" }\n'
+    )
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(DRIVES, "toy_gear_pair", toy_drive.ToyGearPair)
+        study = build_study(tomllib.loads(text), "toy.toml")
+    nominal = {"pinion": 10.0, "gear": 16.0, "backlash": 20.0, "spacing": 5.0}
+    p = gearte.budget_problem(
+        study.drive,
+        study.errors,
+        costs={n: gearte.Reciprocal.normalised(t) for n, t in nominal.items()},
+        nominal=nominal,
+        spec=1e-3,
+        metric=toy_drive.LostMotion(),
+    )
+    factors = {"pinion": 0.5, "gear": 1.7, "backlash": 0.3, "spacing": 0.6}
+    key, n = jax.random.key(8), 64
+    budget_values = np.asarray(
+        gb.metric_samples(p, {k: jnp.asarray(nominal[k] * f) for k, f in factors.items()}, gb.common_draws(p, key, n), exact=True)[0]
+    )
+    scaled = study.errors.replace(
+        **{
+            k: gearte.ErrorSource(
+                study.errors.sources[k].magnitude.scaled(f, about_centre=study.errors.specs[k].kind == "deviation"),
+                study.errors.sources[k].phase,
+            )
+            for k, f in factors.items()
+        }
+    )
+    fn = gearte.TEStudy(study.drive, scaled, metric=toy_drive.LostMotion())
+    study_values = np.asarray(jax.vmap(fn)(gearte.sample_keys(key, 0, n)))
+    np.testing.assert_allclose(study_values, budget_values, rtol=1e-12)

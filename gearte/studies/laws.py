@@ -417,8 +417,10 @@ class Sinusoid(AbstractLaw):
         return amp * jnp.sin(TWO_PI * self.order * k / n + ph)
 
     def scaled(self, factor: float, *, about_centre: bool = False) -> Sinusoid:
-        # A pattern's tolerance is its amplitude's.
-        return Sinusoid(self.amplitude.scaled(factor, about_centre=about_centre), self.phase, order=self.order)  # pyright: ignore[reportArgumentType]
+        # The pattern A sin(…) is centred on 0 whatever the law of A: scaling it scales A about 0 (as a tolerance
+        # budget scales the drawn values), never about the amplitude law's own centre.
+        del about_centre
+        return Sinusoid(self.amplitude.scaled(factor, about_centre=False), self.phase, order=self.order)  # pyright: ignore[reportArgumentType]
 
     def describe(self, unit: str = "µm") -> str:
         return f"A sin(2π·{self.order}·n/N + φ), A: {self.amplitude.describe(unit)}, φ: {self.phase.describe()}"
