@@ -31,6 +31,7 @@ How it is solved:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -210,6 +211,12 @@ class _Draws(eqx.Module):
 
 
 def common_draws(p: BudgetProblem, key: PRNGKeyArray, n: int) -> _Draws:
+    """`n` common random samples of the problem's errors from `key` (the study's per-sample keys)."""
+    return _common_draws_jit(p, key, n)
+
+
+@eqx.filter_jit
+def _common_draws_jit(p: BudgetProblem, key: PRNGKeyArray, n: int) -> _Draws:
     errs = jax.vmap(p.model.sample)(sample_keys(key, 0, n))
     u = {}
     for k in p.names:
@@ -352,6 +359,36 @@ class BudgetResult(eqx.Module):
     label: str
 
 
+# Module-level compiled functions, keyed on the problem's structure and not on a fresh closure: a
+# Pareto front, a second budget on the same drive or a random-assembly comparison reuses the code
+# compiled for the first (every array in the problem, spec included, is a traced argument).
+@eqx.filter_jit
+def _exact_samples_jit(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws) -> Array:
+    return metric_samples(p, tolerances, draws, exact=True)
+
+
+@eqx.filter_jit
+def _worst_violation_jit(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws) -> Array:
+    return jnp.max(_violation(p, metric_samples(p, tolerances, draws)))
+
+
+@eqx.filter_jit
+def _tight_tolerances_jit(p: BudgetProblem, y: Array, draws: _Draws) -> dict[str, Array]:
+    return tight_tolerances(p, y, draws)
+
+
+@eqx.filter_jit
+@functools.partial(jax.grad, argnums=1)
+def _statistic_grad_jit(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws, c: Constraint) -> Array:
+    return statistic(p, metric_samples(p, tolerances, draws)[0], c)
+
+
+def _cost_objective(y: Array, args: tuple[BudgetProblem, _Draws]) -> Array:
+    """The budget's objective: the capped cost of the tight tolerances in the direction e^y."""
+    p, draws = args
+    return _capped_cost(p, tight_tolerances(p, y, draws))
+
+
 def _met(c: Constraint, x: np.ndarray) -> np.ndarray:
     return x >= float(c.spec) if c.metric.higher_is_better else x <= float(c.spec)
 
@@ -368,7 +405,9 @@ def _calibrate_and_verify(
     k_cal, k_ver = jax.random.split(key)
     cal = common_draws(p, k_cal, n_check)
     ver = common_draws(p, k_ver, n_check)
-    run = jax.jit(lambda t, d: metric_samples(p, t, d, exact=True))
+
+    def run(t, d):
+        return _exact_samples_jit(p, t, d)
 
     def ok(x) -> bool:
         return all(
@@ -435,7 +474,7 @@ def optimise_budget(
     draws = common_draws(p, k_crn, n_samples)
     # Feasible at all? At the minimum tolerances, or (none given) at the finest the scale search reaches.
     finest = {n: (p.minimum[n] if float(p.minimum[n]) > 0 else _BRACKET[0] * p.nominal[n]) for n in p.names}
-    worst = float(jnp.max(_violation(p, metric_samples(p, finest, draws))))
+    worst = float(_worst_violation_jit(p, finest, draws))
     if worst > 0:
         check(
             RESULTS.infeasible,
@@ -446,14 +485,11 @@ def optimise_budget(
         )
         return _failed(p, RESULTS.infeasible)
 
-    def objective(y, args):
-        return _capped_cost(p, tight_tolerances(p, y, draws))
-
     # Start from the nominal tolerances' proportions.
     y0 = jnp.log(jnp.asarray([float(p.nominal[n]) for n in p.names]))
     # The smoothed statistic is not smooth to machine precision: ask for 1e-6 relative cost.
-    sol = optx.minimise(objective, optx.BFGS(rtol=1e-6, atol=1e-6), y0, None, max_steps=max_steps, throw=False)
-    tol = tight_tolerances(p, sol.value, draws)
+    sol = optx.minimise(_cost_objective, optx.BFGS(rtol=1e-6, atol=1e-6), y0, (p, draws), max_steps=max_steps, throw=False)
+    tol = _tight_tolerances_jit(p, sol.value, draws)
     capped = {n for n in p.names if float(tol[n]) >= float(p.maximum[n])}
     finer = [n for n in p.names if float(tol[n]) < float(p.minimum[n])]
     if finer:
@@ -508,7 +544,7 @@ def contributions(p: BudgetProblem, tolerances: Mapping[str, float], *, key: int
     draws = common_draws(p, as_key(key), n_samples)
     t = {n: jnp.asarray(float(tolerances[n])) for n in p.names}
     c0 = p.constraints[0]
-    g = eqx.filter_jit(jax.grad(lambda tt, dr: statistic(p, metric_samples(p, tt, dr)[0], c0)))(t, draws)
+    g = _statistic_grad_jit(p, t, draws, c0)
     return {n: float(g[n] * t[n]) for n in p.names}
 
 
