@@ -91,8 +91,10 @@ def test_class_frequencies_from_kinematics(z1, z2):
     assert f["circular_spline"] == 2  # two mesh zones per cam turn past a fixed CS eccentricity
     assert f["flexspline"] == 2 * cam_vs_fs == Fraction(2 * z2, z1)
     assert f["wave_generator"] == 1
-    # Each CS tooth meshes twice per cam turn; so does each FS tooth per turn relative to the FS.
-    assert f["tooth"] == 2 * z2 == 2 * z1 * cam_vs_fs
+    # z₂ CS teeth pass each mesh zone per cam turn, and as many FS teeth (z₁ per turn of the cam relative to the FS).
+    assert f["tooth"] == z2 == z1 * cam_vs_fs
+    # Every z₂ here is even: the two zones mesh in phase and the tooth-mesh fundamental is the TE's line.
+    assert d.line_frequencies()["tooth"] == z2
     assert d.ratio == 1 / -w_fs == Fraction(z1, z2 - z1)
     assert d.beats_per_output_rev == 2
 
@@ -102,7 +104,8 @@ def test_liu_measurement_frequencies_in_cpm():
     # Liu, sec. 4: 184, 368 and 372 cpm expected at 184 rpm (i = 90).
     assert f["wave_generator"] == 184 and f["circular_spline"] == 368
     assert f["flexspline"] == pytest.approx(368 * 182 / 180, rel=1e-15) and round(f["flexspline"]) == 372
-    assert f["tooth"] == 2 * 182 * 184
+    # The tooth-mesh line of the even z₂ = 182 at its fundamental, 33,488 cpm (Liu's eq. 6: 2z₂n = 66,976).
+    assert f["tooth"] == 182 * 184 == 33488
 
 
 def test_components_match_eq6_and_eq8():
@@ -116,11 +119,11 @@ def test_components_match_eq6_and_eq8():
         + 9.0 * np.sin(2 * (th + 2.1 + ALPHA))
         + 5.0 * np.sin(2 * (182 / 180 * th - 1.0 + ALPHA)) / c
         + 3.0 * np.sin(th + 0.7) / c
-        + 2.5 * np.sin(364 * th + 1.9)
+        + 2.5 * np.sin(182 * th + 1.9)  # both zones, in phase for the even z₂ = 182, averaged
     )
     ref = 0.9 / math.sqrt(30.0) * 412.8 / 90.0 / ARCSEC * mesh
     got = np.asarray(gearte.evaluate(drive.signal(errs), jnp.asarray(th)))
-    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10 * np.max(np.abs(ref)))  # sin(364θ) at θ ~ 300 rad
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10 * np.max(np.abs(ref)))  # sin(182θ) at θ ~ 300 rad
 
 
 def test_two_scale_extrema_equal_the_full_grid(drive4, study4):
@@ -558,10 +561,24 @@ def test_gearte_run_harmonic_example(tmp_path):
     assert by_class["circular_spline"]["freq_cpm"] == pytest.approx(368.0, abs=1e-4)
     assert by_class["flexspline"]["freq_cpm"] == pytest.approx(368 * 182 / 180, abs=1e-4)
     assert by_class["wave_generator"]["freq_cpm"] == pytest.approx(184.0, abs=1e-4)
-    assert by_class["tooth"]["freq_cpm"] == pytest.approx(2 * 182 * 184, abs=1e-3)
+    assert by_class["tooth"]["freq_cpm"] == pytest.approx(182 * 184, abs=1e-3)  # z₂ even: the fundamental
+    assert not any(abs(e["freq_cpm"] - 2 * 182 * 184) < 1.0 for e in lines)  # no line at Liu's 2z₂n
+    tm = s["tooth_mesh"]
+    assert tm["zones"].startswith("in phase") and tm["harmonics"] == [
+        {"harmonic": 1, "freq_x_input": "182", "zone_factor": 1.0, "in_te": True, "freq_cpm": 33488.0}
+    ]
+    # Both readings of eq. (8), and the Δ behind Liu's 2.51′ in each (d = 90 mm, N = 36.2, K_b = 1).
+    r = s["estimate"]["readings"]
+    assert r["as_printed"]["arcmin"] == pytest.approx(s["estimate_arcmin"], rel=1e-15)
+    assert r["no_averaging"]["arcmin"] == pytest.approx(s["estimate_arcmin"] * math.sqrt(36.2), rel=1e-12)
+    assert r["no_averaging"]["liu_2_51_needs_delta_um"] == pytest.approx(150.6 * 90 / 412.8, rel=1e-12)
+    assert r["as_printed"]["liu_2_51_needs_delta_um"] == pytest.approx(150.6 * 90 / 412.8 * math.sqrt(36.2), rel=1e-12)
+    basis = {e["name"]: e["basis"] for e in s["estimate"]["values_and_sources"]}
+    assert basis["K_b"].startswith("Liu") and basis["cam_profile"] == "gearte's assumption" and "ISO 1328" in basis["cs_pitch"]
     te = s["te"]
     assert te["metric"] == "peak_to_peak" and te["n"] == 300 and set(te["percentiles"]) >= {"50", "99.73"}
     for f in ("record.png", "spectrum.png", "estimate.png", "histogram.png", "report.md"):
         assert (out / f).is_file()
     report = (out / "report.md").read_text(encoding="utf-8")
     assert "cannot cancel for all time" in report and "P99.73 / estimate" in report
+    assert "both readings of eq. (8)" in report and "z₂ = 182 is even" in report

@@ -14,11 +14,24 @@ input (WG) angle, each error source gives a mesh error along the line of action
 | circular spline (CS) | 2 | e sin(2(θ + Θ + α_n)) / cos α_n   (eq. 2) |
 | flexspline (FS) | 2 z₂/z₁ | e sin(2((z₂/z₁) θ + Θ + α_n)) / cos α_n   (eqs. 3–4) |
 | wave generator (WG) | 1 | e sin(θ + Θ) / cos α_n   (eq. 5) |
-| tooth-to-tooth | 2 z₂ | (f′/2) sin(2 z₂ θ + Θ)   (eq. 6) |
+| tooth-to-tooth, harmonic h | h z₂ | (f′/2) sin(h z₂ θ + Θ) in each zone, times the zone factor (below) |
 
 The FS class is at 2 z₂/z₁ because an FS eccentricity turns with the FS, at
 −θ/i, while the cam turns at θ: their angle grows at (1 + 1/i) θ = (z₂/z₁) θ (Liu's
-text after eq. 3), and the double wave doubles it. The output angle error is then
+text after eq. 3), and the double wave doubles it.
+
+**The tooth-mesh line (where gearte differs from Liu).** z₂ CS teeth pass each of the two
+mesh zones per WG turn, so a tooth-periodic error runs at z₂ in each zone; zone 2 is at π of
+the WG, where the CS tooth phase is z₂ π. Each zone has its own term and the output takes their
+mean, so harmonic h of the tooth-mesh error reaches the TE times ``½ (1 + e^{i h z₂ π})``
+(`tooth_zone_factor`): for an even z₂ (Liu's 182) the zones mesh in phase and the fundamental
+z₂ n is the line (33,488 cpm at 184 rpm), 2 z₂ n its harmonic; for an odd z₂ the zones are half a
+tooth pitch apart, the fundamental cancels and 2 z₂ n stays. Liu's eq. (6) writes
+``f′ sin(2 z₂ ω_b t)/2`` for any z₂ (66,976 cpm), counting 2 z₂ meshing events per WG turn;
+gearte keeps Liu's amplitude f′/2 for a tooth source's own harmonic (`HarmonicSource.harmonic`,
+default 1) and puts it where the two zones put it. See docs/harmonic.md.
+
+The output angle error is then
 (eqs. 8–9)
 
     Δφ = (K_b / √N) · Δ · 412.8 / d      (″, Δ in µm, d = FS pitch diameter in mm)
@@ -37,7 +50,8 @@ tolerance limits, and a *kind* that says how it enters:
   how Liu measures a gear's own eccentricity; e = F_p/2, tangential already, so
   no 1/cos α_n (eq. 7 lists F_p without it).
 - ``"tooth_to_tooth"``: the tangential tooth-to-tooth composite deviation f′ of the CS
-  or FS teeth; e = f′/2, the amplitude of eq. (6)'s ``f′ sin(2 z₂ ω_b t)/2``.
+  or FS teeth; e = f′/2, the amplitude of eq. (6)'s ``f′ sin(2 z₂ ω_b t)/2``, here the
+  amplitude of the source's tooth-mesh harmonic in each zone.
 
 **Phases.** `Eccentricity.phase` Θ is the angle (rad) from the error vector to the
 cam's major axis at θ = 0 for the CS and FS classes (eq. 2's θ at the start), the
@@ -54,17 +68,18 @@ with probability 1 − e^{−4.5} = 98.9 %). With that, Liu's estimate (eq. 7)
 given instant; `statistical_estimate` computes it, eq. (8) turns it into ″.
 
 **Exact metrics and the tooth class.** The TE repeats over the hyper-period (45 input
-revolutions for z₁ = 180, z₂ = 182), and the tooth class runs at 2z₂ = 364 times the input
+revolutions for z₁ = 180, z₂ = 182), and the tooth line runs at z₂ = 182 times the input
 speed: the generic `gearte.extrema` would grid 16 points per tooth period over the whole
-hyper-period, 262,080 points per unit. The tooth class is one line (its sources share
-the frequency) of amplitude b, far faster than the rest, so `HarmonicDrive.extrema` uses
+hyper-period, 131,040 points per unit. When the tooth sources make one line (one harmonic
+that the zones do not cancel) of amplitude b, far faster than the rest, `HarmonicDrive.extrema` uses
 `gearte.extrema_two_scale`: exact extrema of the other classes (1,456 grid points, Newton),
 then Newton on the whole TE from the tooth crests next to each of their best
 candidates. gearte's metrics (`gearte.Peak`, `gearte.PeakToPeak`) take the drive's
 extrema, so every study uses it. The result equals the full-grid extrema (tested to
 ~1e-12); each value also comes with a certified bound on its error, ``max S + b − max F``
-(≤ ½ D₂ (π/2z₂)², where D₂ bounds the curvature of the slower classes), which `gearte run`
-reports. Nothing is dropped or approximated: the tooth class is in every figure.
+(≤ ½ D₂ (π/k)² for the tooth line at k = h z₂, where D₂ bounds the curvature of the slower classes), which `gearte run`
+reports. Nothing is dropped or approximated: the tooth class is in every figure. (Tooth sources
+of two surviving harmonics make two fast lines; the extrema then take the full grid, exact but slower.)
 
 **Per output revolution.** One output revolution is i input revolutions. When the
 hyper-period divides into it (always for an integer ratio of a double-wave drive), the
@@ -97,12 +112,16 @@ from ..core.twoscale import TwoScaleExtrema, extrema_auto, fast_line_order
 from ..core.units import ARCSEC_PER_RAD
 from .harmonic_assembly import AssemblyResult, optimise_assembly
 from .harmonic_estimate import (
+    LIU_COMPUTED_ARCMIN,
+    LIU_MEASURED_ARCMIN,
     Estimate,
     beat_envelope_bounds,
     class_phasors,
+    delta_for_arcmin,
     label_for_frequency,
     labelled_lines,
     output_rev_peak_to_peak,
+    source_phasors,
     statistical_estimate,
 )
 from .harmonic_outputs import study_outputs
@@ -115,6 +134,9 @@ from .harmonic_sources import (
     HarmonicSource,
     class_label,
     finite,
+    line_key,
+    line_title,
+    tooth_zone_factor,
     whole,
 )
 from .protocol import AbstractSinusoidalDrive, AbstractStudyContext, Eccentricity, Errors, SourceSpec, StudyOutputs
@@ -124,6 +146,8 @@ __all__ = [
     "CLASS_FREQUENCY_TEXT",
     "KINDS",
     "LIU_ARCSEC_PER_UM_MM",
+    "LIU_COMPUTED_ARCMIN",
+    "LIU_MEASURED_ARCMIN",
     "AssemblyResult",
     "Estimate",
     "HarmonicDrive",
@@ -132,12 +156,16 @@ __all__ = [
     "beat_envelope_bounds",
     "class_label",
     "class_phasors",
+    "delta_for_arcmin",
     "hyper_period_revs",
     "label_for_frequency",
     "labelled_lines",
+    "line_key",
     "optimise_assembly",
     "output_rev_peak_to_peak",
+    "source_phasors",
     "statistical_estimate",
+    "tooth_zone_factor",
 ]
 
 _extrema_jit = eqx.filter_jit(extrema_auto)
@@ -273,6 +301,8 @@ class HarmonicDrive(AbstractSinusoidalDrive):
             class = "circular_spline"     # circular_spline | flexspline | wave_generator | tooth
             kind = "cumulative_pitch"     # runout (default) | cumulative_pitch | tooth_to_tooth
             tolerance_um = 25
+            basis = "ISO 1328-1:2013 class 6"   # optional: where the tolerance comes from
+            # harmonic = 2                # tooth class only: tooth-mesh harmonic (default 1)
 
             [drive.record]                # optional: the encoder record and spectrum of `gearte run`
             input_rpm = 184
@@ -306,9 +336,11 @@ class HarmonicDrive(AbstractSinusoidalDrive):
             src_cls = st.string("class", choices=tuple(CLASSES))
             kind = st.string("kind", CLASSES[src_cls]["kinds"][0], choices=KINDS)
             tol = st.number("tolerance_um", minimum=0)
+            harmonic = st.integer("harmonic", 1, minimum=1)
+            basis = st.string("basis", "")
             st.finish()
             try:
-                sources.append(HarmonicSource(name, src_cls, kind=kind, tolerance=tol))
+                sources.append(HarmonicSource(name, src_cls, kind=kind, tolerance=tol, harmonic=harmonic, basis=basis))
             except ValueError as e:
                 raise ConfigError(f"{st.where}: {e}") from None
         settings = _run_settings(t)
@@ -327,19 +359,46 @@ class HarmonicDrive(AbstractSinusoidalDrive):
         return Fraction(self.z_flexspline, self.z_circular_spline - self.z_flexspline)
 
     def class_frequencies(self) -> dict[str, Fraction]:
-        """Frequency of each class, as an exact multiple of the input (WG) speed (Liu's eqs. 2, 4, 5, 6)."""
+        """Frequency of each class, as an exact multiple of the input (WG) speed (Liu's eqs. 2, 4, 5).
+
+        ``"tooth"`` is the tooth-mesh frequency of *one* zone, z₂ (teeth passing it per WG turn);
+        whether a harmonic of it reaches the TE depends on the two zones' relative phase
+        (`tooth_zone_factor`, `line_frequencies`). Liu's eq. (6) has 2 z₂.
+        """
         z1, z2, w = self.z_flexspline, self.z_circular_spline, self.waves
         return {
             "circular_spline": Fraction(w),
             "flexspline": Fraction(w * z2, z1),
             "wave_generator": Fraction(1),
-            "tooth": Fraction(w * z2),
+            "tooth": Fraction(z2),
         }
 
+    def zone_factor(self, source: HarmonicSource) -> complex:
+        """The two mesh zones' factor on a source's line: 1 except for the tooth class (`tooth_zone_factor`, identical zones)."""
+        if source.source_class != "tooth":
+            return complex(1.0)  # Liu's eq. (2) already takes both zones into account
+        return tooth_zone_factor(self.z_circular_spline, source.harmonic)
+
+    def source_line(self, source: HarmonicSource) -> tuple[str, Fraction]:
+        """(line key, frequency × input speed) of a source: its class's line, or harmonic h of the tooth-mesh line at h z₂."""
+        f = self.class_frequencies()[source.source_class]
+        return line_key(source.source_class, source.harmonic), f * source.harmonic
+
+    def line_frequencies(self) -> dict[str, Fraction]:
+        """Every line of the TE, × input speed: the CS, FS and WG classes, and each tooth-mesh harmonic of the
+        tooth sources that the two zones do not cancel (key ``"tooth"`` for h = 1, ``"tooth_h2"``, … above)."""
+        out = {c: f for c, f in self.class_frequencies().items() if c != "tooth"}
+        tooth = sorted({s.harmonic for s in self.sources if s.source_class == "tooth" and self.zone_factor(s) != 0})
+        for h in tooth:
+            key, f = self.source_line(HarmonicSource("_", "tooth", tolerance=0.0, harmonic=h))
+            out[key] = f
+        return out
+
     def frequencies_cpm(self, input_rpm: float) -> dict[str, float]:
-        """Frequency of each class in cycles per minute at an input speed of `input_rpm` (Liu, sec. 4: 184, 368, 372 at 184 rpm)."""
+        """Frequency of each line (`line_frequencies`) in cycles per minute at an input speed of `input_rpm`
+        (Liu, sec. 4: 184, 368, 372 at 184 rpm; the tooth line of z₂ = 182 at 33,488)."""
         n = finite("input_rpm", input_rpm, positive=True)
-        return {c: float(f) * n for c, f in self.class_frequencies().items()}
+        return {c: float(f) * n for c, f in self.line_frequencies().items()}
 
     @property
     def beat_frequency(self) -> Fraction:
@@ -365,23 +424,37 @@ class HarmonicDrive(AbstractSinusoidalDrive):
         g = self.gain()
         return {s.name: g * self.source_factor(s) for s in self.sources}
 
-    def components(self, errors: Mapping[str, Eccentricity]) -> Components:
-        """TE components at the output (Liu's eq. 6 with eq. 8), one per source."""
+    def source_term(self, source: HarmonicSource, error: Eccentricity) -> tuple[Array, Array, Array, Fraction] | None:
+        """(amplitude µm, TE phase rad, gain rad/µm, frequency) of one source's term at the output, or None when the
+        two zones cancel it (a tooth harmonic of odd h z₂)."""
+        zf = self.zone_factor(source)
+        if zf == 0:
+            return None
+        theta0 = error.phase[0]
+        if source.source_class in ("circular_spline", "flexspline"):
+            ph = self.waves * (theta0 + self.pressure_angle)  # eqs. (2), (4): sin(2(θ + α_n))
+        else:
+            ph = theta0  # eq. (5) for the WG class; zone 1's tooth-mesh phase for the tooth class
+        gain = self.gain() * self.source_factor(source) * abs(zf)
+        return error.magnitude[0], ph + math.atan2(zf.imag, zf.real), gain, self.source_line(source)[1]
+
+    def components(self, errors: Mapping[str, Eccentricity], *, tooth: bool = True) -> Components:
+        """TE components at the output (Liu's eq. 6 with eq. 8), one per source whose line the two zones do not
+        cancel (a tooth source of an odd h z₂ has none); `tooth=False` leaves the tooth class out."""
         e = self.checked(errors)
-        freq = self.class_frequencies()
-        g = self.gain()
         amp, phase, gain, fr, labels = [], [], [], [], []
         for s in self.sources:
-            theta0 = e[s.name].phase[0]
-            if s.source_class in ("circular_spline", "flexspline"):
-                ph = self.waves * (theta0 + self.pressure_angle)  # eqs. (2), (4): sin(2(θ + α_n))
-            else:
-                ph = theta0  # eq. (5) for the WG class; eq. (6) for the tooth class
-            amp.append(e[s.name].magnitude[0])
+            term = self.source_term(s, e[s.name])
+            if term is None or (s.source_class == "tooth" and not tooth):
+                continue
+            a, ph, g, f = term
+            amp.append(a)
             phase.append(ph)
-            gain.append(g * self.source_factor(s))
-            fr.append(freq[s.source_class])
-            labels.append(f"{s.name} ({CLASSES[s.source_class]['short']}, {freq[s.source_class]})")
+            gain.append(g)
+            fr.append(f)
+            labels.append(f"{s.name} ({line_title(self.source_line(s)[0])}, {f})")
+        if not amp:  # only tooth sources, all cancelled by the zones: a zero TE
+            return Components(jnp.zeros((1,)), jnp.zeros((1,)), [self.class_frequencies()["tooth"]], gain=jnp.zeros((1,)), labels=["none"])
         return Components(jnp.stack(amp, axis=-1), jnp.stack(phase, axis=-1), fr, gain=jnp.stack(gain, axis=-1), labels=labels)
 
     # ------------------------------------------------------------ exact extrema
@@ -400,8 +473,8 @@ class HarmonicDrive(AbstractSinusoidalDrive):
 
     def accuracy(self) -> str:
         return (
-            "exact over the whole hyper-period: two-scale extrema (gearte.extrema_two_scale) — the tooth class "
-            "(2z₂ × input speed) as a fast line on the exact extrema of the other classes (a grid of 16 points per "
+            "exact over the whole hyper-period: two-scale extrema (gearte.extrema_two_scale) — the tooth-mesh line "
+            "(z₂ × input speed for an even z₂) as a fast line on the exact extrema of the other classes (a grid of 16 points per "
             "period of their fastest term, Newton refinement), with a certified bound on the error of every value; "
             "tested equal to the full-grid extrema to ~1e-12"
         )
@@ -431,7 +504,7 @@ class HarmonicDrive(AbstractSinusoidalDrive):
     # ------------------------------------------------------------ reports
 
     def describe(self) -> list[tuple[str, str]]:
-        f = self.class_frequencies()
+        f = self.line_frequencies()
         rows = [
             ("drive", "double-wave harmonic drive, WG input, CS fixed, FS output (Liu)"),
             ("tooth counts z₁ (FS) / z₂ (CS)", f"{self.z_flexspline} / {self.z_circular_spline}"),
@@ -443,9 +516,22 @@ class HarmonicDrive(AbstractSinusoidalDrive):
             ("hyper-period / one output revolution", f"{hyper_period_revs(self)} / {self.ratio} input revolutions"),
             ("beats per output revolution (CS and FS classes)", str(self.beats_per_output_rev)),
         ]
-        rows += [(f"frequency of the {CLASSES[c]['title']} (× input speed)", f"{v} = {float(v):.6g}") for c, v in f.items()]
+        rows += [(f"frequency of the {line_title(c)} (× input speed)", f"{v} = {float(v):.6g}") for c, v in f.items()]
+        z2 = self.z_circular_spline
+        rows.append(
+            (
+                "tooth-mesh line (two zones, CS tooth phase z₂π apart)",
+                f"z₂ = {z2} is {'even: the zones mesh in phase, fundamental z₂' if z2 % 2 == 0 else 'odd: the zones are half a tooth apart, the fundamental cancels, 2z₂ stays'}",
+            )
+        )
         rows += [
-            (f"source {s.name}", f"{CLASSES[s.source_class]['short']} class, {s.kind}, tolerance {float(s.tolerance):g} µm")
+            (
+                f"source {s.name}",
+                f"{CLASSES[s.source_class]['short']} class, {s.kind}"
+                + (f", tooth-mesh harmonic {s.harmonic}" if s.source_class == "tooth" else "")
+                + f", tolerance {float(s.tolerance):g} µm"
+                + (f" ({s.basis})" if s.basis else ""),
+            )
             for s in self.sources
         ]
         return rows
@@ -458,7 +544,7 @@ class HarmonicDrive(AbstractSinusoidalDrive):
 
 def hyper_period_revs(drive: HarmonicDrive) -> Fraction:
     """Hyper-period of the TE, input revolutions, for the classes the drive has sources in."""
-    used = sorted({drive.class_frequencies()[s.source_class] for s in drive.sources})
+    used = sorted({drive.source_line(s)[1] for s in drive.sources if drive.zone_factor(s) != 0})
     num, den = 0, 1
     for v in used:
         num, den = math.gcd(num * v.denominator, v.numerator * den), den * v.denominator

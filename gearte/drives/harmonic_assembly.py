@@ -24,10 +24,9 @@ import optimistix as optx
 
 from ..core.extrema import _basis, _grid_values, grid_size
 from ..core.precision import require_x64
-from ..core.signal import Components, to_signal
+from ..core.signal import to_signal
 from ..core.solution import RESULTS, check
-from .harmonic_estimate import class_phasors
-from .harmonic_sources import CLASSES
+from .harmonic_estimate import class_phasors, source_phasors
 from .protocol import Eccentricity
 
 if TYPE_CHECKING:
@@ -42,7 +41,8 @@ class AssemblyResult(eqx.Module):
     - `errors`: the unit's errors with the adjusted phases.
     - `turns`: change of each adjustable source's angle Θ, rad (in (−π, π]).
     - `before`, `after`: peak-to-peak TE over one output revolution, rad.
-    - `class_before`, `class_after`: |resultant| of each class, rad.
+    - `class_before`, `class_after`: |resultant| of each class (each line: a tooth-mesh harmonic
+      above the first is its own, `class_phasors`), rad.
     - `class_least`: the least |resultant| each class can reach by turning its adjustable
       sources (closed form: a polygon closes only if no side exceeds the sum of the others).
     - `result`: the solve's `gearte.RESULTS` code: that of the best start, or
@@ -129,23 +129,13 @@ def optimise_assembly(
     adjustable = check_adjustable(drive, adjustable)
     if isinstance(starts, bool) or not isinstance(starts, int) or starts < 1:
         raise ValueError(f"starts: must be a whole number ≥ 1, got {starts!r}")
-    names = [s.name for s in drive.sources]
     base = drive.checked(errors)
-    comp0 = drive.components(base)
-    keep = [i for i, s in enumerate(drive.sources) if s.source_class != "tooth"]
-    sig0 = to_signal(
-        Components(
-            comp0.amplitude[jnp.asarray(keep)],
-            comp0.phase[jnp.asarray(keep)],
-            [comp0.freq[i] for i in keep],
-            gain=comp0.gain[jnp.asarray(keep)],
-        )
-    )
+    comp0 = drive.components(base, tooth=False)
+    sig0 = to_signal(comp0)
     m = grid_size(sig0.orders, 16)
     cos_b, sin_b = _basis(sig0.orders, m)
     scale = float(jnp.sum(comp0.amplitude * comp0.gain)) or 1.0
     width = 1e-3 * scale
-    adj_idx = [names.index(a) for a in adjustable]
 
     def errors_for(y):
         out = dict(base)
@@ -155,15 +145,7 @@ def optimise_assembly(
 
     def smooth_p2p(y, args):
         del args
-        comp = drive.components(errors_for(y))
-        sig = to_signal(
-            Components(
-                comp.amplitude[jnp.asarray(keep)],
-                comp.phase[jnp.asarray(keep)],
-                [comp.freq[i] for i in keep],
-                gain=comp.gain[jnp.asarray(keep)],
-            )
-        )
+        sig = to_signal(drive.components(errors_for(y), tooth=False))
         f = _grid_values(sig, cos_b, sin_b) / width
         return width * (jax.nn.logsumexp(f) + jax.nn.logsumexp(-f))
 
@@ -195,13 +177,12 @@ def optimise_assembly(
         y_best, after = np.asarray(ys[best]), float(vals[best])
     final = errors_for(jnp.asarray(y_best))
     turns = {a: float((y_best[j] + math.pi) % (2 * math.pi) - math.pi) for j, a in enumerate(adjustable)}
-    # Closed-form least resultant per class (fixed sources as one phasor, adjustable ones free).
-    amp = np.asarray(comp0.amplitude * comp0.gain)
-    ph = np.asarray(comp0.phase)
+    # Closed-form least resultant per line (fixed sources as one phasor, adjustable ones free).
+    phasors = source_phasors(drive, base)
     least = {}
-    for c in CLASSES:
-        fixed = sum((amp[i] * np.exp(1j * ph[i]) for i, s in enumerate(drive.sources) if s.source_class == c and i not in adj_idx), 0j)
-        adj = [amp[i] for i, s in enumerate(drive.sources) if s.source_class == c and i in adj_idx]
+    for c in class_phasors(drive, base):
+        fixed = sum((p for n, (k, p) in phasors.items() if k == c and n not in adjustable), 0j)
+        adj = [abs(p) for n, (k, p) in phasors.items() if k == c and n in adjustable]
         least[c] = _least_resultant(fixed, adj)
     check(result, throw=throw and not bool(result == RESULTS.some_starts_failed), what="optimise_assembly")
     return AssemblyResult(

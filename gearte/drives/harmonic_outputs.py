@@ -24,8 +24,16 @@ from ..core.signal import evaluate
 from ..core.solution import RESULTS, is_successful, result_name
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from .harmonic_assembly import optimise_assembly
-from .harmonic_estimate import beat_envelope_bounds, class_phasors, labelled_lines, statistical_estimate
-from .harmonic_sources import CLASSES, class_label
+from .harmonic_estimate import (
+    LIU_COMPUTED_ARCMIN,
+    LIU_MEASURED_ARCMIN,
+    beat_envelope_bounds,
+    class_phasors,
+    delta_for_arcmin,
+    labelled_lines,
+    statistical_estimate,
+)
+from .harmonic_sources import CLASSES, LIU_ARCSEC_PER_UM_MM, class_label, line_short, line_title, tooth_zone_factor
 from .protocol import AbstractStudyContext, Eccentricity, Figure, StudyOutputs
 
 if TYPE_CHECKING:
@@ -79,7 +87,9 @@ def study_outputs(drive: HarmonicDrive, context: AbstractStudyContext) -> StudyO
         "instant_std": inst_std,
         "instant_std_over_sigma": inst_std / (est_u / 3.0) if est_u else None,
     }
+    readings, lines_readings = _estimate_readings(drive, est, values, unit, metric)
     summary["estimate_arcmin"] = est.arcmin
+    summary["estimate_arcmin_no_averaging"] = est.arcmin_no_averaging
     summary["estimate"] = {
         "equation": "Δ = ½√(F_p1² + F_p2² + f′₁² + f′₂² + ΣE²/cos²α_n) (eq. 7); Δφ = (K_b/√N)·Δ·412.8/d (eq. 8)",
         "delta_um": est.delta_um,
@@ -90,10 +100,10 @@ def study_outputs(drive: HarmonicDrive, context: AbstractStudyContext) -> StudyO
         "terms_um2": est.terms_um2,
         "meaning": "± this at 3σ: 3 × the standard deviation of the TE at any one instant over the batch, when every "
         "magnitude is Rayleigh with scale tolerance/6 and every phase uniform (Liu's D = (E/6)²)",
-    }
+    } | readings
     summary["estimate_vs_monte_carlo"] = ratio
     summary["extrema_method"] = {
-        "method": "two-scale exact extrema: the tooth class (2z₂ × input speed) as a fast line on the exact extrema of the "
+        "method": "two-scale exact extrema: the tooth-mesh line as a fast line on the exact extrema of the "
         "other classes (gearte.extrema_two_scale); tested equal to the full-grid extrema to ~1e-12",
         "certified_error_bound_max": gap_max,
         "unit": unit,
@@ -134,6 +144,7 @@ def study_outputs(drive: HarmonicDrive, context: AbstractStudyContext) -> StudyO
         f"{p('median_over_estimate', 2)} × the estimate. K_b (0.8–1.0, from experiment) scales every figure alike; "
         "it does not make the estimate a 99.73 % bound on the catalogue figure.",
         "",
+        *lines_readings,
         "![Monte Carlo against the estimate](estimate.png)",
         "",
         f"Extrema: {summary['extrema_method']['method']}; the certified bound on the error of any sample's value is "
@@ -177,6 +188,174 @@ def study_outputs(drive: HarmonicDrive, context: AbstractStudyContext) -> StudyO
     return StudyOutputs(summary=summary, report=lines, figures=figures)
 
 
+def _source_basis(drive: HarmonicDrive) -> list[dict]:
+    """Every value behind the estimate with where it comes from (the study file's `basis`, or Liu's own values)."""
+    z1, z2 = drive.z_flexspline, drive.z_circular_spline
+    a_deg = math.degrees(float(drive.pressure_angle))
+    n_default = abs(float(drive.teeth_in_mesh) - 0.1 * (z1 + z2)) < 1e-12
+    liu_drive = (z1, z2) == (180, 182)
+    return [
+        {"name": "z₁, z₂", "value": f"{z1}, {z2}", "basis": "Liu, sec. 4 (i = 90)" if liu_drive else "the study file"},
+        {"name": "α_n", "value": f"{a_deg:g}°", "basis": "Liu, sec. 2.3 (α_n = 20°)" if abs(a_deg - 20) < 1e-9 else "the study file"},
+        {
+            "name": "K_b",
+            "value": f"{float(drive.k_b):g}",
+            "basis": "Liu, sec. 2.3 (K_b = 1.0)" if float(drive.k_b) == 1.0 else "the study file",
+        },
+        {
+            "name": "N",
+            "value": f"{float(drive.teeth_in_mesh):.6g}",
+            "basis": "Liu, sec. 2.3 (N = 0.1 (z₁ + z₂))" if n_default else "the study file",
+        },
+        {"name": "d", "value": f"{float(drive.pitch_diameter):g} mm", "basis": "the study file (Liu gives no pitch diameter)"},
+    ] + [
+        {
+            "name": s.name,
+            "value": f"{float(s.tolerance):g} µm",
+            "class": s.source_class,
+            "kind": s.kind,
+            "basis": s.basis or "not stated in the study file",
+        }
+        for s in drive.sources
+    ]
+
+
+def _estimate_readings(drive: HarmonicDrive, est, values: np.ndarray, unit: str, metric: str) -> tuple[dict, list[str]]:
+    """Both readings of eq. (8) (with Liu's averaging 1/√N and without), the Δ behind Liu's 2.51′ in each, and both
+    against the Monte Carlo and Liu's measured units (each a peak-to-peak of one unit).
+
+    The drive's TE carries eq. (8)'s gain as printed, so the Monte Carlo is of that reading; without the averaging
+    every TE is √N times larger, the Monte Carlo included: the ratios to the estimate are the same in both readings,
+    what changes is where Liu's measured units fall in the batch.
+    """
+    per_arcmin = angle_from_rad(1.0, unit) / angle_from_rad(1.0, "arcmin")  # this unit per ′
+    v_arcmin = values / per_arcmin
+    n = float(drive.teeth_in_mesh)
+    per_um = float(drive.k_b) * LIU_ARCSEC_PER_UM_MM / float(drive.pitch_diameter)  # ″ per µm of Δ, no averaging
+    readings = {}
+    for key, arcmin, formula, factor, scale in (
+        ("as_printed", est.arcmin, "(K_b/√N)·Δ·412.8/d", f"1/√N = 1/√{n:.6g} = {est.averaging:.6f}", 1.0),
+        ("no_averaging", est.arcmin_no_averaging, "K_b·Δ·412.8/d", "1", 1.0 / est.averaging),
+    ):
+        v = scale * v_arcmin
+        median, p9973 = (float(x) for x in np.percentile(v, [50.0, 99.73]))
+        readings[key] = {
+            "formula": formula,
+            "averaging_factor": factor,
+            "arcmin": arcmin,
+            "arcsec": 60.0 * arcmin,
+            "liu_2_51_needs_delta_um": delta_for_arcmin(drive, LIU_COMPUTED_ARCMIN, averaging=key == "as_printed"),
+            "monte_carlo_median_arcmin": median,
+            "monte_carlo_p99_73_arcmin": p9973,
+            "monte_carlo_median_over_estimate": median / arcmin if arcmin else None,
+            "monte_carlo_p99_73_over_estimate": p9973 / arcmin if arcmin else None,
+            "liu_measured_over_estimate": [m / arcmin if arcmin else None for m in LIU_MEASURED_ARCMIN],
+            "monte_carlo_fraction_at_or_below_measured": {f"{m:g}": float(np.mean(v <= m)) for m in LIU_MEASURED_ARCMIN},
+        }
+    out = {
+        "readings": readings,
+        "liu": {
+            "computed_arcmin": LIU_COMPUTED_ARCMIN,
+            "measured_arcmin": list(LIU_MEASURED_ARCMIN),
+            "measured_over_computed": [m / LIU_COMPUTED_ARCMIN for m in LIU_MEASURED_ARCMIN],
+            "measured_is": "the peak-to-peak of one unit's record over more than one output revolution (Liu, sec. 4, Table 1)",
+            "tolerances": "from the drive's drawings, not listed in the paper",
+        },
+        "monte_carlo_metric": metric,
+        "values_and_sources": _source_basis(drive),
+    }
+    a, b = readings["as_printed"], readings["no_averaging"]
+    measured = ", ".join(f"{m:g}′" for m in LIU_MEASURED_ARCMIN)
+    lines = [
+        "### Liu's estimate: both readings of eq. (8)",
+        "",
+        f"Eq. (8) as printed, Δφ = (K_b/√N)·Δ·412.8/d, averages over the N tooth pairs in mesh and the two zones; read "
+        f"without the factor 1/√N, Δφ = K_b·Δ·412.8/d. With K_b = {float(drive.k_b):g}, N = {n:.6g}, "
+        f"d = {float(drive.pitch_diameter):g} mm: {per_um:.5f}″ per µm of Δ without the averaging, "
+        f"{per_um * est.averaging:.5f}″ with it. gearte's TE model carries the printed gain; without the averaging every "
+        f"TE, the Monte Carlo's included, is √N = {1 / est.averaging:.4f} times larger, so the Monte Carlo / estimate "
+        "ratios are the same in both readings and what changes is where Liu's measured units fall.",
+        "",
+        f"| reading | Δφ (Δ = {est.delta_um:.3f} µm) | Δ for Liu's {LIU_COMPUTED_ARCMIN}′ | Monte Carlo median, P99.73 | "
+        f"Liu's measured {measured} / Δφ | Monte Carlo units at or below {measured} |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, r in (("as printed, with 1/√N", a), ("without 1/√N", b)):
+        fr = r["monte_carlo_fraction_at_or_below_measured"]
+        lines.append(
+            f"| {name}: {r['formula']} | {r['arcsec']:.3f}″ = **{r['arcmin']:.4f}′** | {r['liu_2_51_needs_delta_um']:.1f} µm | "
+            f"{r['monte_carlo_median_arcmin']:.4f}′, {r['monte_carlo_p99_73_arcmin']:.4f}′ "
+            f"({r['monte_carlo_median_over_estimate']:.3f}, {r['monte_carlo_p99_73_over_estimate']:.3f} × Δφ) | "
+            + ", ".join(f"{x:.3f}" for x in r["liu_measured_over_estimate"])
+            + " | "
+            + ", ".join(f"{100 * x:.1f} %" for x in fr.values())
+            + " |"
+        )
+    lines += [
+        "",
+        f"Arithmetic: Liu's {LIU_COMPUTED_ARCMIN}′ = {60 * LIU_COMPUTED_ARCMIN:.1f}″; {60 * LIU_COMPUTED_ARCMIN:.1f} × "
+        f"{float(drive.pitch_diameter):g} / (412.8 × {float(drive.k_b):g}) = {b['liu_2_51_needs_delta_um']:.2f} µm without "
+        f"the averaging, × √{n:.6g} = {a['liu_2_51_needs_delta_um']:.1f} µm with it (d is this study's; Liu gives none). "
+        f"Monte Carlo: {_METRIC_TEXT.get(metric, metric)}, {len(values):,} units. Liu's measured {measured} are each the "
+        "peak-to-peak of one unit's record (sec. 4), not a batch statistic; Liu's own ratio measured / computed is "
+        + ", ".join(f"{m / LIU_COMPUTED_ARCMIN:.2f}" for m in LIU_MEASURED_ARCMIN)
+        + ".",
+        "",
+        "Values behind the estimate and where each comes from:",
+        "",
+        "| value | class, kind | amount | from |",
+        "|---|---|---|---|",
+    ]
+    for e in out["values_and_sources"]:
+        ck = f"{CLASSES[e['class']]['short']}, {e['kind'].replace('_', ' ')}" if "class" in e else "drive"
+        lines.append(f"| {e['name']} | {ck} | {e['value']} | {e['basis']} |")
+    lines.append("")
+    return out, lines
+
+
+def _tooth_line_note(drive: HarmonicDrive, n: float) -> str:
+    """One sentence on where the tooth-mesh line lies and why (the two zones' relative phase)."""
+    z2 = drive.z_circular_spline
+    if not any(s.source_class == "tooth" for s in drive.sources):
+        return ""
+    fund = z2 * n
+    if z2 % 2 == 0:
+        why = (
+            f"z₂ = {z2} is even: the two zones, z₂π apart in CS tooth phase, mesh in phase, so the tooth-mesh "
+            f"fundamental z₂·n = {fund:,.0f} cpm is the line (2z₂·n = {2 * fund:,.0f} cpm its harmonic)"
+        )
+    else:
+        why = (
+            f"z₂ = {z2} is odd: the two zones are half a tooth pitch apart, so the fundamental z₂·n = {fund:,.0f} cpm "
+            f"cancels and only even harmonics, 2z₂·n = {2 * fund:,.0f} cpm first, stay"
+        )
+    return f" Tooth mesh: {z2} CS teeth pass each zone per input turn; {why}. Liu's eq. (6) puts it at 2z₂·n for any z₂."
+
+
+def _tooth_mesh_summary(drive: HarmonicDrive, input_rpm: float | None) -> dict:
+    """Where the tooth-mesh lines lie and why: per-zone frequency, the zones' relative phase, each harmonic's fate."""
+    z2 = drive.z_circular_spline
+    harmonics = sorted({s.harmonic for s in drive.sources if s.source_class == "tooth"})
+    per_h = []
+    for h in harmonics:
+        zf = tooth_zone_factor(z2, h)
+        entry = {"harmonic": h, "freq_x_input": str(h * z2), "zone_factor": abs(zf), "in_te": zf != 0}
+        if input_rpm is not None:
+            entry["freq_cpm"] = h * z2 * input_rpm
+        per_h.append(entry)
+    out = {
+        "z_circular_spline": z2,
+        "per_zone_x_input": str(z2),
+        "zone_2_tooth_phase": f"z₂·π = {z2}π",
+        "zones": "in phase (even z₂)" if z2 % 2 == 0 else "half a tooth pitch apart (odd z₂)",
+        "harmonics": per_h,
+        "liu_eq6_x_input": str(2 * z2),
+    }
+    if input_rpm is not None:
+        out["liu_eq6_cpm"] = 2 * z2 * input_rpm
+    return out
+
+
 def _typical_unit(drive: HarmonicDrive, errs: dict, typical: int, unit: str) -> tuple[dict, list[str], list[Figure]]:
     """The typical unit's class lines and beats; with run settings, its record, labelled spectrum and envelopes."""
     sym = UNIT_SYMBOLS[unit]
@@ -202,14 +381,16 @@ def _typical_unit(drive: HarmonicDrive, errs: dict, typical: int, unit: str) -> 
         "fs_amplitude": to_unit(abs(ph["flexspline"])),
     }
     model_lines = []
-    for c, f in f_cls.items():
-        if any(s.source_class == c for s in drive.sources):
+    used_lines = {drive.source_line(s)[0] for s in drive.sources}
+    for c, f in drive.line_frequencies().items():
+        if c in used_lines:
             entry = {"class": c, "source": class_label(c), "freq_x_input": str(f), "amplitude_arcsec": abs(ph[c]) * ARCSEC_PER_RAD}
             if settings is not None:
                 entry["freq_cpm"] = float(f) * settings.input_rpm
             model_lines.append(entry)
     model_lines.sort(key=lambda e: -e["amplitude_arcsec"])
     summary["model_lines"] = model_lines
+    summary["tooth_mesh"] = _tooth_mesh_summary(drive, None if settings is None else settings.input_rpm)
 
     lines = [
         "### The typical unit: lines, beats, record",
@@ -282,7 +463,7 @@ def _typical_unit(drive: HarmonicDrive, errs: dict, typical: int, unit: str) -> 
         "class_frequencies_cpm": drive.frequencies_cpm(n),
     }
     nyquist_cpm = 30.0 * rec.sample_rate_hz
-    used = {s.source_class for s in drive.sources}
+    used = {drive.source_line(s)[0] for s in drive.sources}
     aliased = [c for c, v in drive.frequencies_cpm(n).items() if v >= nyquist_cpm and c in used]
     summary["record"]["aliased_classes"] = aliased
     lines += [
@@ -290,10 +471,11 @@ def _typical_unit(drive: HarmonicDrive, errs: dict, typical: int, unit: str) -> 
         f"A record like Liu's bench (sec. 4): {n:g} rpm at the input, {rec.duration_s:g} s at "
         f"{rec.sample_rate_hz:g} Hz = {rec.duration_s / out_rev_s:.2f} output revolutions of {out_rev_s:.2f} s; "
         f"Hann window, bins of {rec.resolution_cpm:.3f} cpm. Expected lines: "
-        + ", ".join(f"{CLASSES[c]['short']} {v:.3f} cpm" for c, v in drive.frequencies_cpm(n).items() if c in used)
+        + ", ".join(f"{line_short(c)} {v:.3f} cpm" for c, v in drive.frequencies_cpm(n).items() if c in used)
         + "."
+        + _tooth_line_note(drive, n)
         + (
-            f" The {', '.join(CLASSES[c]['title'] for c in aliased)} lies above the Nyquist frequency "
+            f" The {', '.join(line_title(c) for c in aliased)} lies above the Nyquist frequency "
             f"({nyquist_cpm:g} cpm) and appears aliased, as on a real bench; raise sample_rate_hz to see it in place."
             if aliased
             else ""
@@ -360,7 +542,7 @@ def _typical_unit(drive: HarmonicDrive, errs: dict, typical: int, unit: str) -> 
         (
             e["freq_cpm"],
             to_unit(e["amplitude_arcsec"] / ARCSEC_PER_RAD),
-            f"{e['freq_cpm']:.2f} cpm {CLASSES[e['class']]['short'] if e['class'] else ''}",
+            f"{e['freq_cpm']:.2f} cpm {line_short(e['line']) if e['line'] else ''}",
             e["kind"] == "line",
         )
         for e in found
@@ -448,10 +630,11 @@ def _assembly(drive: HarmonicDrive, errs: dict, typical: int, unit: str, seed: i
         "| class | amplitude before | after | least reachable (closed form) |",
         "|---|---|---|---|",
     ]
-    for c in CLASSES:
-        if any(s.source_class == c for s in drive.sources):
+    used_lines = {drive.source_line(s)[0] for s in drive.sources}
+    for c in res.class_before:
+        if c in used_lines:
             lines.append(
-                f"| {CLASSES[c]['title']} | {to_unit(res.class_before[c]):.4f}{sym} | {to_unit(res.class_after[c]):.4f}{sym} | "
+                f"| {line_title(c)} | {to_unit(res.class_before[c]):.4f}{sym} | {to_unit(res.class_after[c]):.4f}{sym} | "
                 f"{to_unit(res.class_least[c]):.4f}{sym} |"
             )
     lines += ["", "| source | turned by |", "|---|---|"]
