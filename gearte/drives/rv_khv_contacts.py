@@ -133,7 +133,7 @@ def rv_system(drive: RVKHV, err: dict, theta_out, load_sign) -> ContactSystem:
     th_in = drive.ratio * theta_out
     planet_rot = -zc * theta_out
     i_car = 2 + 3 * (Nc + D)
-    zeta = math.pi / 2 + theta_out + 2 * math.pi * jnp.arange(Nc) / Nc
+    zeta = math.pi / 2 + theta_out + 2 * math.pi * jnp.arange(Nc, dtype=float) / Nc
     C = rc * _dir(zeta)  # crank centres
     zeros = jnp.zeros(n)
 

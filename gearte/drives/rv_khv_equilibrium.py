@@ -21,10 +21,15 @@ method with a backtracking (Armijo) line search: Φ is piecewise quadratic in th
 contacts, so once the set of closed contacts is found the full Newton step lands on the minimum
 and the iteration stops at a gradient at rounding level. The result code is reported per solve.
 
-**Rigid limit.** For a fixed set of closed contacts the minimiser is affine in the load,
-q(f) = q₀ + H⁻¹ f (H the Hessian there), so the rigid-body position is q₀ = q − H⁻¹ f: one more
-back-substitution with the Hessian already factorised. It is independent of the load and of the
-stiffnesses while the set of closed contacts stays the same (checked in the tests).
+**Rigid limit.** For a fixed set of closed unilateral contacts and bearings without clearance the
+minimiser is affine in the load, q(f) = q₀ + H⁻¹ f (H the Hessian there), so the rigid-body
+position is q₀ = q − H⁻¹ f: one more back-substitution with the Hessian already factorised,
+independent of the load and of a common scale of the stiffnesses while the set of closed contacts
+stays the same (tested to 1e-9). A bearing in contact at its clearance is not affine in the load
+(its tangential stiffness k (1 − c/|r|) grows with the load): there the correction is first order
+and the floating parts' rigid-limit positions are approached as the load decreases, not reached
+exactly. Where several load paths share the torque (hyperstatic), the ratios of the stiffnesses
+decide the sharing: they are inputs of the model.
 
 **Gradients** are those of the implicit-function theorem: the iteration runs on stopped
 gradients, and one Newton step from the solution with the Hessian held carries the derivative
@@ -120,16 +125,21 @@ def gradient(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, " n"]:
     return s.G.T @ (s.k * p) + jnp.einsum("bin,bi->n", s.B, s.kb[:, None] * stretch) + s.mu * q - s.f
 
 
-def hessian(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, "n n"]:
-    """The (generalised) Hessian of Φ at q: closed contacts only."""
+def hessian(s: ContactSystem, q: Float[Array, " n"], *, radial: bool = False) -> Float[Array, "n n"]:
+    """The (generalised) Hessian of Φ at q: closed contacts only.
+
+    With `radial=True`, a bearing in contact keeps only its stiffness along r̂ (the stiffness of its penetration; its
+    tangential stiffness k (1 − c/|r|) vanishes with the load): the compliance of the rigid-limit correction."""
     n = q.shape[0]
     active = (s.G @ q + s.e > 0.0).astype(q.dtype)
     H = (s.G.T * (s.k * active)) @ s.G
     _, nr, over, rhat, _ = _bearing_terms(s, q)
     ratio = jnp.where(over, s.c / jnp.where(nr > 0, nr, 1.0), 0.0)
+    if radial:
+        ratio = jnp.where(s.c > 0, 1.0, 0.0)
     eye = jnp.eye(2, dtype=q.dtype)
     local = (1.0 - ratio)[:, None, None] * eye + ratio[:, None, None] * (rhat[:, :, None] * rhat[:, None, :])
-    local = local * (s.kb * over)[:, None, None]
+    local = local * (s.kb * over.astype(q.dtype))[:, None, None]
     H = H + jnp.einsum("bim,bij,bjn->mn", s.B, local, s.B)
     return H + s.mu * jnp.eye(n, dtype=q.dtype)
 
@@ -171,6 +181,7 @@ def solve(s: ContactSystem) -> Equilibrium:
     H = jax.lax.stop_gradient(hessian(ss, q_star))
     # One Newton step with the Hessian held: the value stays, the derivative is the implicit one.
     q = q_star - jnp.linalg.solve(H, gradient(s, q_star))
+    # The rigid limit: remove the part of q proportional to the load for the closed contacts.
     q_rigid = q - jnp.linalg.solve(H, s.f)
     force = s.k * jnp.maximum(s.G @ q + s.e, 0.0)
     _, _, _, _, stretch = _bearing_terms(s, q)
