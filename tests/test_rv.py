@@ -103,8 +103,8 @@ def test_uniform_profile_clearance_gives_the_backlash_formula():
     stage = CycloidPin(ZP, pin_circle_radius=R, pin_radius=RPIN, eccentricity=A, modification=CycloidModification(0.0, c, 0.0))
     te, _ = _single_disc(stage, CycloidErrors(), jnp.asarray(PITCH_THETAS), 0.0)
     lm = np.max(np.asarray(te[0] - te[1]))
-    l = arms(PITCH_THETAS)
-    ref = np.max(c * (1 / np.max(np.where(l > 0, l, 0), axis=1) + 1 / np.max(np.where(l < 0, -l, 0), axis=1)))
+    lev = arms(PITCH_THETAS)
+    ref = np.max(c * (1 / np.max(np.where(lev > 0, lev, 0), axis=1) + 1 / np.max(np.where(lev < 0, -lev, 0), axis=1)))
     assert lm == pytest.approx(ref, rel=2e-3)
 
 
@@ -120,9 +120,9 @@ def test_pin_radius_error_gives_the_closed_form_lost_motion(drive):
     r = drive.response({"pin_radius": -c_um})
     lm = np.asarray(r.te[0] - r.te[1])
     th_o = np.asarray(r.output_angle)
-    l = np.concatenate([arms((ZP - 1) * th_o), arms((ZP - 1) * th_o - np.pi)], axis=1)
+    lev = np.concatenate([arms((ZP - 1) * th_o), arms((ZP - 1) * th_o - np.pi)], axis=1)
     rc, rg = 30.0, 30.0 * 24 / 36  # crank circle; planet pitch radius r_c z_g / (z_s + z_g)
-    ref = 1e-3 * c_um * (1 / np.max(np.where(l > 0, l, 0), axis=1) + 1 / np.max(np.where(l < 0, -l, 0), axis=1))
+    ref = 1e-3 * c_um * (1 / np.max(np.where(lev > 0, lev, 0), axis=1) + 1 / np.max(np.where(lev < 0, -lev, 0), axis=1))
     np.testing.assert_allclose(lm, ref / (1 + rc / ((ZP - 1) * rg)), rtol=2e-3)
 
 
@@ -162,7 +162,7 @@ def test_rigid_limit_does_not_depend_on_load_or_stiffness(drive):
     errs = dict(_scaled(1.0), pin_radius=jnp.asarray(-8.0))
     base = drive.response(errs)
     for kw in (dict(deflection_mm=1e-8), dict(deflection_mm=1e-6), dict(pin_stiffness=30.0, mesh_stiffness=30.0, bearing_stiffness=30.0)):
-        other = eqx.tree_at(lambda d: [getattr(d, k) for k in kw], drive, [jnp.asarray(v, dtype=float) for v in kw.values()])
+        other = eqx.tree_at(lambda d, kw=kw: [getattr(d, k) for k in kw], drive, [jnp.asarray(v, dtype=float) for v in kw.values()])
         r = other.response(errs)
         np.testing.assert_allclose(np.asarray(r.te), np.asarray(base.te), rtol=1e-9, atol=1e-14)
     # The loaded TE converges to the rigid one linearly in the load: 10× less load, 10× less deflection.

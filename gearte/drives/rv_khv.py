@@ -281,14 +281,22 @@ class RVKHV(AbstractGridDrive):
             ("sun z_s / planets z_g", f"{self.z_sun} / {self.z_planet}"),
             ("ratio i = 1 + z_p z_g / z_s", f"{self.ratio:.6g}"),
             ("cranks N / discs", f"{self.cranks} / {self.discs}"),
-            ("pin circle R, pin r, eccentricity a", f"{float(self.stage.pin_circle_radius):g}, {float(self.stage.pin_radius):g}, "
-             f"{float(self.stage.eccentricity):g} mm"),
+            (
+                "pin circle R, pin r, eccentricity a",
+                f"{float(self.stage.pin_circle_radius):g}, {float(self.stage.pin_radius):g}, {float(self.stage.eccentricity):g} mm",
+            ),
             ("crank circle r_c", f"{float(self.crank_circle_radius):g} mm"),
             ("nominal backlash j_n", f"{float(self.backlash_mm) * 1e3:g} µm"),
-            ("nominal clearances crank–disc / crank–carrier / main", f"{float(self.crank_disc_clearance_mm) * 1e3:g} / "
-             f"{float(self.crank_carrier_clearance_mm) * 1e3:g} / {float(self.main_bearing_clearance_mm) * 1e3:g} µm"),
-            ("profile modification (shift, equidistant, rotation)", f"{float(self.stage.modification.shift):+g} mm, "
-             f"{float(self.stage.modification.equidistant):+g} mm, {float(self.stage.modification.rotation) * ARCSEC_PER_RAD:g}″"),
+            (
+                "nominal clearances crank–disc / crank–carrier / main",
+                f"{float(self.crank_disc_clearance_mm) * 1e3:g} / "
+                f"{float(self.crank_carrier_clearance_mm) * 1e3:g} / {float(self.main_bearing_clearance_mm) * 1e3:g} µm",
+            ),
+            (
+                "profile modification (shift, equidistant, rotation)",
+                f"{float(self.stage.modification.shift):+g} mm, "
+                f"{float(self.stage.modification.equidistant):+g} mm, {float(self.stage.modification.rotation) * ARCSEC_PER_RAD:g}″",
+            ),
         ]
 
     # ------------------------------------------------------------ the drive protocol
@@ -353,8 +361,13 @@ class RVKHV(AbstractGridDrive):
         theta = np.asarray(th_o) * self.ratio
         i, k = int(np.argmax(te)), int(np.argmin(te))
         return Trace(
-            theta=theta, te=te, span_revs=f"{self.ratio:g}", max=float(te[i]), min=float(te[k]),
-            theta_max=float(theta[i]), theta_min=float(theta[k]),
+            theta=theta,
+            te=te,
+            span_revs=f"{self.ratio:g}",
+            max=float(te[i]),
+            min=float(te[k]),
+            theta_max=float(theta[i]),
+            theta_min=float(theta[k]),
         )
 
     @classmethod

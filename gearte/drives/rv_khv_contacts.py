@@ -223,4 +223,3 @@ def output_index(drive: RVKHV) -> int:
 
 
 __all__ = ("cycloid_errors", "dof_count", "output_index", "pin_contacts", "rv_system", "single_disc_system")
-
