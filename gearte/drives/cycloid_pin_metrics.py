@@ -34,7 +34,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..core.metrics import AbstractMetric, Quantity
 from ..core.precision import require_x64
-from .cycloid_pin_contact import Clearances, _analyse, _sweep_jit, loaded_pairs, smooth_loaded_pairs
+from .cycloid_pin_contact import Clearances, _analyse, _clearances_jit, _sweep_jit, loaded_pairs, smooth_loaded_pairs
 from .cycloid_pin_geometry import CycloidErrors, CycloidModification, checked_errors
 
 if TYPE_CHECKING:
@@ -289,6 +289,7 @@ def sensitivities(
 __all__ = (
     "METRICS",
     "floating_disc",
+    "floating_loaded_pairs",
     "UNIT_METRICS",
     "LoadedPairs",
     "LoadedPairsMin",
@@ -388,5 +389,40 @@ def floating_disc(
         "best_offset": {"offset": float(r[k]), "phase": float(t[k]), "lost_motion_min": float(worst[k])},
         "interfering_rigid": float(np.mean(rigid < 0)),
         "interfering_floating": float(np.mean(floating < 0)),
+        "float_radius": rho,
+    }
+
+
+def floating_loaded_pairs(
+    drive: CycloidPin,
+    errors: CycloidErrors | Mapping[str, Any] | None,
+    input_angle: float,
+    *,
+    radius_um: float | None = None,
+    rings: int = 2,
+    directions: int = 12,
+) -> dict[str, Any]:
+    """Loaded pairs at one input angle for the disc centre anywhere within `radius_um` of the eccentric where the disc
+    does not interfere (lost motion ≥ 0): where a floating disc can settle (see `floating_disc`).
+
+    **Returns:** ``{"min", "max"}`` of the loaded-pair count over those centre positions (None if there is none),
+    ``"positions"`` (how many of the `rings` × `directions` + 1 searched), ``"float_radius"`` (µm).
+    """
+    require_x64()
+    err = checked_errors(drive, errors)
+    rho = float(err.disc_offset) if radius_um is None else float(radius_um)
+    th = jnp.asarray(input_angle, dtype=float)
+    counts = []
+    for k in range(rings * directions + 1):
+        r = 0.0 if k == 0 else rho * ((k - 1) // directions + 1) / rings
+        t = 0.0 if k == 0 else ((k - 1) % directions) * 2 * math.pi / directions
+        e = eqx.tree_at(lambda e: (e.disc_offset, e.disc_offset_phase), err, _offset(r * math.cos(t), r * math.sin(t)))
+        c = _clearances_jit(drive, e, th, True)  # the report's analysis at its input angle: compiled once
+        if float(c.lost_motion) >= 0:
+            counts.append(int(loaded_pairs(c, budget_mm=drive.analysis.budget_mm)))
+    return {
+        "min": min(counts) if counts else None,
+        "max": max(counts) if counts else None,
+        "positions": len(counts),
         "float_radius": rho,
     }

@@ -29,7 +29,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD
 from .cycloid_pin_contact import _analyse, clearances, loaded_pairs, pitch_angles, revolution_angles, sweep, theoretical_pairs
 from .cycloid_pin_geometry import YAO_LIANG_J, checked_errors, paper_pin, paper_position, paper_tooth
-from .cycloid_pin_metrics import LoadedPairs, LostMotion, RotationErrorPeakToPeak, floating_disc, sensitivities
+from .cycloid_pin_metrics import LoadedPairs, LostMotion, RotationErrorPeakToPeak, floating_disc, floating_loaded_pairs, sensitivities
 from .cycloid_pin_table import TO_INTERNAL, unit_of
 from .protocol import AbstractStudyContext, Figure, StudyOutputs
 
@@ -253,7 +253,7 @@ def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
         "lost_motion_range_arcmin": [float(lm.min()), float(lm.max())],
         "lost_motion_at_input_angle_arcmin": float(at.lost_motion) * ARCMIN_PER_RAD,
         "interference": bool(lm.min() < 0),
-        "disc_centre": _disc_centre(centre),
+        "disc_centre": _disc_centre(centre) | {"loaded_pairs_floating": floating_loaded_pairs(d, err, theta0)},
         "rotation_error_p2p_arcsec": float(te_f.max() - te_f.min()),
         "rotation_error_reverse_p2p_arcsec": float(te_r.max() - te_r.min()),
         "rotation_error_at_input_angle_arcsec": float(at.rotation_error) * ARCSEC_PER_RAD,
@@ -567,7 +567,13 @@ def report(drive: CycloidPin, s: dict) -> list[str]:
         f"{s['lost_motion_at_input_angle_arcmin']:.3f}′ at θ_T)"
         + ("; **negative somewhere: the rigid disc, its centre held at the fixed offsets, interferes there**" if s["interference"] else "")
         + ";",
-        f"- the disc centre: {s['disc_centre']['explanation']}",
+        f"- the disc centre: {s['disc_centre']['explanation']}"
+        + (
+            f" Floating without interference at θ_T, it has {s['disc_centre']['loaded_pairs_floating']['min']}–"
+            f"{s['disc_centre']['loaded_pairs_floating']['max']} loaded pairs (the rigid count above is that of an interfering disc)."
+            if s["interference"] and s["disc_centre"]["loaded_pairs_floating"]["min"] is not None
+            else ""
+        ),
         f"- rotation error (TE) of the stage, forward load: peak-to-peak **{s['rotation_error_p2p_arcsec']:.2f}″** over "
         f"{drive.analysis.sweep_revolutions} input revolution(s) (reverse load {s['rotation_error_reverse_p2p_arcsec']:.2f}″).",
         "",
