@@ -136,24 +136,22 @@ def test_errors_given_in_the_paper_frame_grind_the_paper_disc():
     um = 1e-3
     dbeta = 30 / ARCSEC * np.sin(2 * np.pi * np.arange(1, ZA + 1) / ZA)
     mine = errors_from_paper(d, J=J, indexing=dbeta, setup_phase=math.radians(45), mandrel_phase=0.0)
-    err = CycloidErrors(
-        dressing_x=2.0, dressing_y=2.0, setup_eccentricity=31.5, mandrel_runout=5.0, **{k: v for k, v in mine.items()}
-    )
+    err = CycloidErrors(dressing_x=2.0, dressing_y=2.0, setup_eccentricity=31.5, mandrel_runout=5.0, **{k: v for k, v in mine.items()})
     rot = -2 * np.pi * J / ZA  # the paper's disc frame is gearte's turned 2πJ/z_a clockwise
     c, s = np.cos(rot), np.sin(rot)
     theta = np.linspace(-3.0, 3.0, 41)
     worst = 0.0
     for n in (1, 4, 7, 13, 20):
-        pts = _paper_tooth_points(
-            n, theta, beta_err=dbeta[n - 1], dX=2 * um, dY=2 * um, dA=31.5 * um, phiA=math.radians(45), dB=5 * um
-        )
+        pts = _paper_tooth_points(n, theta, beta_err=dbeta[n - 1], dX=2 * um, dY=2 * um, dA=31.5 * um, phiA=math.radians(45), dB=5 * um)
         pts = np.stack([c * pts[:, 0] - s * pts[:, 1], s * pts[:, 0] + c * pts[:, 1]], -1)
         space = int(np.flatnonzero(paper_tooth(d, np.arange(ZA), J=J) == n)[0])
         line = np.asarray(tooth_profile(d, np.linspace(-np.pi, np.pi, 20001), errors=err, space=space))
         worst = max(worst, float(np.max(_distance_to_polyline(pts, line))))
         # The old reading (space n − 1 = tooth n, the same sense of rotation) is a different disc.
         if n == 4:
-            old = CycloidErrors(dressing_x=2.0, dressing_y=2.0, setup_eccentricity=31.5, mandrel_runout=5.0, setup_phase=math.radians(45), indexing=dbeta)
+            old = CycloidErrors(
+                dressing_x=2.0, dressing_y=2.0, setup_eccentricity=31.5, mandrel_runout=5.0, setup_phase=math.radians(45), indexing=dbeta
+            )
             wrong = np.asarray(tooth_profile(d, np.linspace(-np.pi, np.pi, 20001), errors=old, space=n - 1))
             assert np.max(_distance_to_polyline(pts, wrong)) > 0.02
     assert worst < 1e-5  # the polyline's chords: 0.01 µm
@@ -184,7 +182,9 @@ def test_a_fixed_offset_beyond_the_radial_clearance_interferes_and_a_floating_di
     pos = pitch_angles(d, 4)  # θ_T = 0: a pin exactly at a space bottom
     ok = floating_disc(d, {"pin_radius": -20.0, "eccentricity": 15.0}, radius_um=10.0, positions=pos, rings=2, directions=12)
     bad = floating_disc(d, {"pin_radius": -20.0, "eccentricity": 25.0}, radius_um=10.0, positions=pos, rings=2, directions=12)
-    assert ok["radial_clearance"] == pytest.approx(20.0) and bad["root_gap"] == pytest.approx(-5.0) and bad["tip_gap"] == pytest.approx(45.0)
+    assert (
+        ok["radial_clearance"] == pytest.approx(20.0) and bad["root_gap"] == pytest.approx(-5.0) and bad["tip_gap"] == pytest.approx(45.0)
+    )
     assert ok["interfering_rigid"] == 0 and ok["lost_motion_min_rigid"] >= 0
     assert bad["interfering_rigid"] > 0 and bad["lost_motion_min_rigid"] < 0
     assert bad["interfering_floating"] == 0 and bad["lost_motion_min_floating"] >= 0

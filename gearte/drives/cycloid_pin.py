@@ -81,8 +81,14 @@ A pin can also reach the far flank of its tooth space, but only after the disc t
 through the space's width at the pin's radius; gearte, like the paper, pairs each pin
 with its own flank.
 
-**The drive** (`CycloidPin`, a grid drive of the drive protocol): its 20 error sources are
-the fields of `CycloidErrors`, each a signed deviation (µm, or rad for angles; one value
+**Generating grinding** (`process = "generating"`, `gearte.drives.cycloid_pin_grinding`): the wheel is one
+pin moved by the grinder's generating crank and work drive; its errors move the flank along the normal by
+e_n(φ). **The paper's numbering** (K = n − J, `paper_position`, `paper_pin`, `paper_tooth`,
+`errors_from_paper` in `gearte.drives.cycloid_pin_geometry`) and the **disc centre** held at a fixed offset or
+floating (`gearte.drives.cycloid_pin_metrics.floating_disc`) are set out in docs/cycloid.md.
+
+**The drive** (`CycloidPin`, a grid drive of the drive protocol): its 20 error sources (26 for a
+generating-ground disc) are the fields of `CycloidErrors`, each a signed deviation (µm, or rad for angles; one value
 per tooth space or per pin where the field has one), in the order of `ERROR_FIELDS`. Its
 response to a set of errors is the clearance analysis at every angle of its grid
 (`input_angles`: one input revolution or more, `positions_per_pitch` per pin pitch), and
@@ -133,9 +139,9 @@ from .cycloid_pin_geometry import (
     ERROR_UNITS,
     GENERATING_ERROR_FIELDS,
     GENERATING_ONLY,
-    PROCESSES,
     PER_PIN,
     PER_SPACE,
+    PROCESSES,
     CycloidErrors,
     CycloidModification,
     _number,
@@ -437,7 +443,9 @@ class CycloidPin(AbstractGridDrive):
         out = {}
         for name in self.error_fields:
             shape = (self.z_lobes,) if name in PER_SPACE else (self.z_pins,) if name in PER_PIN else ()
-            symbol, text = GENERATING_SOURCE_TEXT[name] if self.process == "generating" and name in GENERATING_SOURCE_TEXT else SOURCE_TEXT[name]
+            symbol, text = (
+                GENERATING_SOURCE_TEXT[name] if self.process == "generating" and name in GENERATING_SOURCE_TEXT else SOURCE_TEXT[name]
+            )
             out[name] = SourceSpec(name, "deviation", shape=shape, unit=ERROR_UNITS[name], symbol=symbol, description=text)
         return out
 
@@ -537,12 +545,12 @@ class CycloidPin(AbstractGridDrive):
 __all__ = (
     "ALL_ERROR_FIELDS",
     "ERROR_FIELDS",
+    "ERROR_UNITS",
     "GENERATING_ERROR_FIELDS",
     "GENERATING_ONLY",
-    "PROCESSES",
-    "ERROR_UNITS",
     "PER_PIN",
     "PER_SPACE",
+    "PROCESSES",
     "SOURCE_TEXT",
     "Clearances",
     "CycloidAnalysis",

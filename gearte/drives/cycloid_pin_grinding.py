@@ -111,14 +111,7 @@ def normal_deviation(g: GeneratingDeviation, phi, *, wheel_pin_circle_radius, ec
     lever = a * za * s / S  # P_Z × N_Z
     eps_c = g.chain * jnp.sin(phi + g.chain_phase)
     delta_p = g.pitch * (jnp.sin(g.pitch_arg + phi / za) - jnp.sin(g.pitch_arg))
-    return (
-        g.slide * (1.0 - K * c) / S
-        - g.across * K * s / S
-        - g.wheel
-        - g.crank * (c - K) / S
-        - a * eps_c * s / S
-        - delta_p * lever
-    )
+    return g.slide * (1.0 - K * c) / S - g.across * K * s / S - g.wheel - g.crank * (c - K) / S - a * eps_c * s / S - delta_p * lever
 
 
 __all__ = ("GeneratingDeviation", "generating_deviation", "normal_deviation", "rigid_pitch_error")

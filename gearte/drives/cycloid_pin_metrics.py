@@ -288,8 +288,6 @@ def sensitivities(
 
 __all__ = (
     "METRICS",
-    "floating_disc",
-    "floating_loaded_pairs",
     "UNIT_METRICS",
     "LoadedPairs",
     "LoadedPairsMin",
@@ -297,6 +295,8 @@ __all__ = (
     "LostMotionMin",
     "RotationErrorPeakToPeak",
     "Sensitivity",
+    "floating_disc",
+    "floating_loaded_pairs",
     "grid_metrics",
     "grid_metrics_jit",
     "sensitivities",
@@ -365,7 +365,9 @@ def floating_disc(
     # One compiled sweep (the drive's response), called per offset: new error values do not recompile.
     lm = np.stack(
         [
-            np.asarray(_sweep_jit(drive, eqx.tree_at(lambda e: (e.disc_offset, e.disc_offset_phase), err, _offset(x, y)), p, False).lost_motion)
+            np.asarray(
+                _sweep_jit(drive, eqx.tree_at(lambda e: (e.disc_offset, e.disc_offset_phase), err, _offset(x, y)), p, False).lost_motion
+            )
             for x, y in zip(dx, dy, strict=True)
         ]
     )

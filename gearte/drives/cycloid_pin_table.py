@@ -139,7 +139,9 @@ def _field_key(t: Table, field: str) -> str | None:
     return want if t.has(want) else None
 
 
-def reference_errors(t: Table, counts: dict[str, int], fields: tuple[str, ...] = PROCESSES["form"]) -> tuple[dict[str, Any], dict[str, Any]]:
+def reference_errors(
+    t: Table, counts: dict[str, int], fields: tuple[str, ...] = PROCESSES["form"]
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """The error fields of ``[drive.reference]`` (internal units) and how they were given (for summaries).
 
     `counts`: ``{"space": z_a, "pin": z_b}``; `fields`: the error fields of the disc's process.
