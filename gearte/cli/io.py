@@ -170,8 +170,10 @@ def check_output(out: str | Path, *, inputs: Iterable[str | Path] = (), option: 
         if parent.exists():
             if not parent.is_dir():
                 raise OutputError(f"{option} {given}: {parent} is a file, so no folder can be made below it; choose another {option}")
-            if not os.access(parent, os.W_OK | os.X_OK):
-                raise OutputError(f"{option} {given}: cannot write in {parent} (permission denied); choose another {option}")
+            try:  # a real probe: permissions, read-only and special file systems
+                os.rmdir(tempfile.mkdtemp(prefix=".gearte-probe-", dir=parent))
+            except OSError as e:
+                raise OutputError(f"{option} {given}: cannot write in {parent} ({e.strerror}); choose another {option}") from None
             break
     if resolved.parent == resolved:
         raise OutputError(f"{option} {given}: is the root folder; name a new folder for the results")

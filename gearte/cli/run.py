@@ -118,7 +118,7 @@ def _sampler(study: Study) -> _RunSample:
     return _RunSample(TEStudy(study.drive, study.errors, metric=study.metric), study.metric)
 
 
-def estimate_cost(study: Study, *, measure_above: int = MEASURE_ABOVE) -> Cost:
+def estimate_cost(study: Study, *, measure_above: int | None = None) -> Cost:
     """Estimate the study's own Monte Carlo (study kinds not included): the per-sample results' size from their
     shapes, and, above `measure_above` samples, its time from a timed compiled call of two blocks of samples
     (after a first call that compiles it; a few seconds, more for a grid drive)."""
@@ -126,7 +126,7 @@ def estimate_cost(study: Study, *, measure_above: int = MEASURE_ABOVE) -> Cost:
     shapes = jax.eval_shape(fn, as_key(0))
     per = 3 * 8 + sum(int(np.prod(x.shape)) * x.dtype.itemsize for x in jax.tree.leaves(shapes[1]))  # te, te_rad, index
     nbytes = per * study.samples
-    if study.samples <= measure_above:
+    if study.samples <= (MEASURE_ABOVE if measure_above is None else measure_above):
         return Cost(study.samples, nbytes)
     # The smallest compiled call (two blocks), run twice: the second is timed.
     n = 2 * default_block_size(fn.bytes_per_sample())
