@@ -7,6 +7,7 @@ and the earlier results folder is byte-for-byte what it was, with no temporary f
 The writing phase and an interrupt that a library swallows are tested in-process.
 """
 
+import gc
 import os
 import shutil
 import signal
@@ -69,7 +70,7 @@ def test_signal_at_any_moment_keeps_the_previous_result(sig, delay, previous, tm
     assert sorted(x.name for x in tmp_path.iterdir()) == ["res"]  # no temporary folder left
 
 
-def test_interrupt_while_writing_and_a_swallowed_interrupt(previous, tmp_path, monkeypatch):
+def test_interrupt_while_writing_and_a_swallowed_interrupt(previous, tmp_path, monkeypatch, capsys):
     out = tmp_path / "res"
     shutil.copytree(previous, out)
     before = snapshot(out)
@@ -94,6 +95,24 @@ def test_interrupt_while_writing_and_a_swallowed_interrupt(previous, tmp_path, m
     monkeypatch.setattr(plots, "trace", swallowed)
     assert run("run", RANDOM, "--out", out, "--samples", 64) == 130
     assert snapshot(out) == before
+
+    def in_a_gc_callback(*a, **k):
+        # JAX runs Python in garbage-collector callbacks; an interrupt raised there cannot propagate
+        # (Python reports it as "ignored"): it must still stop the run, quietly.
+        def callback(phase, info):
+            gc.callbacks.remove(callback)
+            os.kill(os.getpid(), signal.SIGINT)
+
+        gc.callbacks.append(callback)
+        gc.collect()
+        return real_trace(*a, **k)
+
+    monkeypatch.setattr(plots, "trace", in_a_gc_callback)
+    capsys.readouterr()
+    assert run("run", RANDOM, "--out", out, "--samples", 64) == 130
+    assert snapshot(out) == before
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "Exception ignored" not in err and "Traceback" not in err, err
     fresh = tmp_path / "fresh" / "deeper"
     assert run("run", RANDOM, "--out", fresh, "--samples", 64) == 130
     assert sorted(x.name for x in tmp_path.iterdir()) == ["res"]  # nor the parent folders made for it

@@ -8,9 +8,10 @@ gearte wrote there); it refuses a non-empty folder holding anything else, the cu
 and any folder holding an input.
 
 Ctrl-C (SIGINT) and SIGTERM raise `KeyboardInterrupt` wherever Python code is running, and
-are also remembered: an interrupt that arrives while JAX compiles or computes outside
-Python, or that a library swallows, still stops the run before its result is renamed into
-place (`commit_point`).
+are also remembered: an interrupt that Python cannot raise (one that lands in a garbage-
+collector callback, as JAX registers, is "ignored" by Python) or that a library swallows
+still stops the run at its next phase, and always before its result is renamed into place
+(`commit_point`).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import json
 import os
 import shutil
 import signal
+import sys
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -55,8 +57,22 @@ def _handler(signum, frame):
         raise Interrupted(signum)
 
 
+def _quiet_unraisable(previous):
+    """A `sys.unraisablehook` that drops interrupts (remembered by the handler) and passes on the rest."""
+
+    def hook(unraisable):
+        if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+            return
+        previous(unraisable)
+
+    hook.gearte = True  # pyright: ignore[reportFunctionMemberAccess]
+    return hook
+
+
 def install_interrupt_handlers() -> None:
     """Route SIGINT and SIGTERM to `_handler` (main thread only; a no-op elsewhere)."""
+    if not getattr(sys.unraisablehook, "gearte", False):
+        sys.unraisablehook = _quiet_unraisable(sys.unraisablehook)
     try:
         signal.signal(signal.SIGINT, _handler)
         signal.signal(signal.SIGTERM, _handler)

@@ -165,7 +165,9 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None)
         if kind.table in study.kinds:
             outcome = kind.run(study, study.kinds[kind.table], progress=progress)
             outcomes.append(outcome)
+            commit_point()  # an interrupt swallowed while compiling stops the run at the next phase
             study = outcome.study
+    commit_point()
     mc = monte_carlo(
         _sampler(study),
         key=study.seed,
@@ -247,7 +249,9 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None)
     if original.errors is not study.errors and "allocation" not in summary:
         summary["study"]["source_rules"] = {n: s.phase.describe() for n, s in original.errors.sources.items() if s.phase is not None}
 
+    commit_point()
     extra = study.drive.study_outputs(RunContext(study, values_rad, outputs, progress))
+    commit_point()
     clash = set(extra.summary) & set(summary)
     if clash:
         raise ValueError(f"{type(study.drive).__name__}.study_outputs: keys {sorted(clash)} are already in summary.json")
