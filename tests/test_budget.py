@@ -212,6 +212,13 @@ def test_budget_example_through_gearte_run(tmp_path):
         (lambda t: t.replace('cost_model = "reciprocal"', 'cost_model = "linear"'), "cost_model: must be one of"),
         (
             lambda t: t.replace("tolerance_um = 13", "tolerance_um = 0"),
+            r"\[errors.sun_manufacturing.magnitude\] scale_fraction: × tolerance_um 0 µm gives a Rayleigh scale of 0",
+        ),
+        (
+            lambda t: t.replace(
+                'tolerance_um = 13\nmagnitude = { law = "rayleigh", scale_fraction = 0.5,',
+                'tolerance_um = 0\nmagnitude = { law = "rayleigh", scale_um = 6.5,',
+            ),
             r"\[errors.sun_manufacturing.magnitude\] truncate_at_tolerance: the tolerance is 0",
         ),
         (lambda t: t.replace("maximum_factor = 10.0", "maximum_factor = 0.5"), "maximum_factor"),

@@ -25,6 +25,8 @@ from .. import __version__
 from ..core.metrics import AbstractMetric
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import AbstractStudyContext, Figure
+from ..studies.errors import ErrorModel, ErrorSource
+from ..studies.laws import FixedPhase, Optimised
 from ..studies.montecarlo import PERCENTILES, TEStudy, as_key, default_block_size, monte_carlo, statistics
 from . import plots
 from .config import Study
@@ -118,11 +120,21 @@ def _sampler(study: Study) -> _RunSample:
     return _RunSample(TEStudy(study.drive, study.errors, metric=study.metric), study.metric)
 
 
+def _phases_to_choose_held(study: Study) -> Study:
+    """The study with every phase an allocation is to choose (`Optimised`) held at 0 rad: the same shapes and cost
+    per sample, before the allocation has run."""
+    src = study.errors.sources
+    if not any(isinstance(s.phase, Optimised) for s in src.values()):
+        return study
+    held = {n: ErrorSource(s.magnitude, FixedPhase(0.0)) if isinstance(s.phase, Optimised) else s for n, s in src.items()}
+    return dataclasses.replace(study, errors=ErrorModel(held, study.errors.specs))
+
+
 def estimate_cost(study: Study, *, measure_above: int | None = None) -> Cost:
     """Estimate the study's own Monte Carlo (study kinds not included): the per-sample results' size from their
     shapes, and, above `measure_above` samples, its time from a timed compiled call of two blocks of samples
     (after a first call that compiles it; a few seconds, more for a grid drive)."""
-    fn = _sampler(study)
+    fn = _sampler(_phases_to_choose_held(study))
     shapes = jax.eval_shape(fn, as_key(0))
     per = 3 * 8 + sum(int(np.prod(x.shape)) * x.dtype.itemsize for x in jax.tree.leaves(shapes[1]))  # te, te_rad, index
     nbytes = per * study.samples
