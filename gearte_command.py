@@ -15,11 +15,15 @@ import sys
 
 def main() -> int:
     received: list[int] = []
+    armed: list[bool] = []
 
     def handler(signum, frame):
         del frame
         received.append(signum)
-        raise KeyboardInterrupt
+        # While gearte, JAX and their compiled extensions are imported the interrupt is only remembered: an
+        # exception raised inside an extension's initialisation comes out as an ImportError, or worse.
+        if armed:
+            raise KeyboardInterrupt
 
     def unraisable(u, previous=sys.unraisablehook):
         # An interrupt raised inside a garbage-collector callback cannot propagate; it is remembered above.
@@ -33,6 +37,7 @@ def main() -> int:
         if not received:
             from gearte.cli.main import main as gearte_main  # installs its own handlers when it starts
 
+            armed.append(True)
             if not received:
                 status = gearte_main()
                 if status < 128:

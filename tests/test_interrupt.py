@@ -42,8 +42,25 @@ def snapshot(folder: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
 
 
-# (signal, seconds after start): during the imports, around compilation, while sampling.
-MOMENTS = [(signal.SIGINT, 0.05), (signal.SIGINT, 1.0), (signal.SIGTERM, 2.0), (signal.SIGINT, 4.0)]
+# (signal, seconds after start): during the imports, around compilation, while sampling. The first is
+# sent as soon as the command's handlers are in place (before that only Python's own start-up runs,
+# whose Ctrl-C behaviour is Python's): on a loaded machine 0.05 s can still be inside that start-up.
+MOMENTS = [(signal.SIGINT, 0.05), (signal.SIGINT, 0.3), (signal.SIGINT, 1.0), (signal.SIGTERM, 2.0), (signal.SIGINT, 4.0)]
+
+
+def wait_for_handlers(pid: int, timeout_s: float = 30.0) -> None:
+    """Wait until process `pid` catches SIGTERM (Python itself never does): gearte_command's handlers are set."""
+    status = Path(f"/proc/{pid}/status")
+    if not status.exists():  # not Linux: rely on the delay alone
+        return
+    bit = 1 << (signal.SIGTERM - 1)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        caught = next((line.split()[1] for line in status.read_text().splitlines() if line.startswith("SigCgt:")), "0")
+        if int(caught, 16) & bit:
+            return
+        time.sleep(0.002)
+    raise AssertionError(f"the command did not install its signal handlers within {timeout_s} s")
 
 
 @pytest.mark.parametrize("sig, delay", MOMENTS, ids=[f"{signal.Signals(s).name}-{d}s" for s, d in MOMENTS])
@@ -61,6 +78,7 @@ def test_signal_at_any_moment_keeps_the_previous_result(sig, delay, previous, tm
         env=env,
         cwd=tmp_path,
     )
+    wait_for_handlers(p.pid)
     time.sleep(delay)
     p.send_signal(sig)
     stdout, stderr = p.communicate(timeout=120)

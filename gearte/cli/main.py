@@ -129,6 +129,13 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _interrupted(done: bool) -> int:
+    signum = interrupt_received() or getattr(sys.exc_info()[1], "signum", None) or signal.SIGINT
+    what = "after the command had finished" if done else "no results were written; an earlier result is untouched"
+    print(f"gearte: interrupted ({signal.Signals(signum).name}); {what}", file=sys.stderr)
+    return 128 + signum
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the `gearte` command line; returns the exit status (2 for bad input, 128 + the signal when
     interrupted: 130 for Ctrl-C, 143 for SIGTERM)."""
@@ -151,10 +158,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gearte: error: {e.filename or ''}{': ' if e.filename else ''}{e.strerror or e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        signum = interrupt_received() or getattr(sys.exc_info()[1], "signum", None) or signal.SIGINT
-        what = "after the command had finished" if done else "no results were written; an earlier result is untouched"
-        print(f"gearte: interrupted ({signal.Signals(signum).name}); {what}", file=sys.stderr)
-        return 128 + signum
+        return _interrupted(done)
+    except Exception:
+        # An interrupt raised inside a compiled extension (e.g. while a module is imported) can come out as
+        # another exception; the signal was remembered, so it is reported as what it is.
+        if interrupt_received() is not None:
+            return _interrupted(done)
+        raise
     finally:
         reset_interrupts()
 
