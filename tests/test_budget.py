@@ -52,8 +52,8 @@ def study_at(p, tolerances):
 def te_samples(p, tolerances, key, n):
     """The exact metric (rad) of samples 0 … n − 1 at these tolerances.
 
-    One block shape for every call (2 blocks of 1000 per compiled call): every study of the
-    two-source problem, at any tolerances and sample count, reuses one compiled program.
+    One block size for every call (blocks of 1000): every study of the two-source problem, at any
+    tolerances and sample count, reuses one compiled program.
     """
     return gearte.monte_carlo(study_at(p, tolerances), key=key, n_samples=n, block_size=1000, chunk_size=2000).values
 

@@ -48,7 +48,7 @@ def _seed(text: str) -> int:
 def _overrides(p: argparse.ArgumentParser) -> None:
     p.add_argument("--samples", type=_positive_int, help="number of Monte Carlo samples (overrides the file)")
     p.add_argument("--seed", type=_seed, help="random seed (overrides the file)")
-    p.add_argument("--chunk-size", type=_positive_int, help="samples per compiled batch (memory bound; results do not change)")
+    p.add_argument("--chunk-size", type=_positive_int, help="samples between progress updates (results do not change)")
 
 
 def _study(args) -> Study:

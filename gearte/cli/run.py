@@ -366,7 +366,7 @@ def report(study: Study, s: dict, errs: dict, tr) -> str:
         f"- Metric: {study.metric.describe()}.",
         "- TE Δθ = θ_out − θ_in / i (rad inside gearte; reported in " + study.unit + f", 1 rad = {ARCSEC_PER_RAD:.3f}″).",
         f"- Samples: {s['samples']:,}; seed {s['seed']}; {s['assumptions']['random_keys']}. Samples are computed in blocks of "
-        f"{s['block_size']}, {s['chunk_size']} per compiled call; results do not depend on the chunk size.",
+        f"{s['block_size']} (one compiled program), progress shown every {s['chunk_size']}; results do not depend on the chunk size.",
         "- Random phases are uniform on [0, 2π); magnitudes and values follow the laws in the table above.",
         f"- Precision: {s['assumptions']['precision']}.",
         f"- Accuracy: {s['assumptions']['accuracy']}.",
