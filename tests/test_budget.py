@@ -180,7 +180,7 @@ def test_bad_budget_inputs():
 def test_budget_example_through_gearte_run(tmp_path):
     text = (ROOT / "examples" / "planetary_wang2013_budget.toml").read_text()
     text = (
-        text.replace("samples = 4096 ", "samples = 512 ")
+        text.replace("samples = 4096 ", "samples = 256 ")
         .replace("check_samples = 50000", "check_samples = 5000")
         .replace("pareto_specs = [90.0, 105.0, 120.0, 140.0, 160.0]", "pareto_specs = [110.0, 140.0]")
     )
