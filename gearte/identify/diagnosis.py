@@ -93,7 +93,8 @@ def diagnose(problem: IdentificationProblem, solution: Identification, record: M
     unexplained = tuple(
         (float(f) / rpm, float(a))
         for f, a in zip(found.freq_cpm, found.amplitude)
-        if all(abs(float(f) / rpm - m) > 2 * step for m in model_f) and a > 3 * float(solution.sigma) / np.sqrt(len(te) / 2)
+        if all(abs(float(f) / rpm - m) > 2 * step for m in model_f)
+        and a > 8 * float(solution.sigma) * np.sqrt(2 / len(te))  # far above the noise floor
     )
     return Diagnosis(
         lines=tuple(out[:lines]),

@@ -315,7 +315,7 @@ def write_record(path: str | Path, rec: MeasuredRecord, *, unit: str = "arcsec",
     if unit not in TE_UNITS:
         raise ValueError(f"unit: use one of {', '.join(TE_UNITS)}, got {unit!r}")
     head = [f"# gearte TE record: {rec.source}"] + ([f"# input_rpm = {rec.input_rpm:g}"] if rec.input_rpm else [])
-    rows = [f"{t:.10g},{v:.{digits}g}" for t, v in zip(np.asarray(rec.theta), np.asarray(rec.te) / TE_UNITS[unit])]
+    rows = [f"{t:.17g},{v:.{digits}g}" for t, v in zip(np.asarray(rec.theta), np.asarray(rec.te) / TE_UNITS[unit])]
     Path(path).write_text("\n".join(head + [f"input_angle_rad,te_{unit}"] + rows) + "\n", encoding="utf-8")
 
 
@@ -348,13 +348,21 @@ def synthetic_record(
     errs = turned(drive, errors, turns or {})
     te = np.asarray(evaluate(drive.signal(errs), jnp.asarray(theta)))
     ratio = float(getattr(drive, "ratio", 1.0))
-    out = theta / ratio + te
+    te = encoder_noise(theta, te, key=key, ratio=ratio, noise=noise, counts_per_rev=counts_per_rev)
+    return MeasuredRecord(theta=theta, te=te, input_rpm=input_rpm, source="synthetic record")
+
+
+def encoder_noise(theta, te, *, key, ratio: float, noise: float = 0.0, counts_per_rev: int | None = None) -> np.ndarray:
+    """The TE (rad) an output encoder reads: output angle θ/i + TE, plus Gaussian noise of standard deviation
+    `noise` (rad), rounded to `counts_per_rev` counts, less θ/i (see `synthetic_record`)."""
+    theta = np.asarray(theta, dtype=np.float64)
+    out = theta / ratio + np.asarray(te, dtype=np.float64)
     if noise:
-        out = out + float(noise) * np.asarray(jax.random.normal(as_key(key), (n,), dtype=float))
+        out = out + float(noise) * np.asarray(jax.random.normal(as_key(key), theta.shape, dtype=float))
     if counts_per_rev is not None:
         q = TWO_PI / int(counts_per_rev)
         out = np.round(out / q) * q
-    return MeasuredRecord(theta=theta, te=out - theta / ratio, input_rpm=input_rpm, source="synthetic record")
+    return out - theta / ratio
 
 
 def turned(drive, errors: Errors, turns: Mapping[str, float]) -> dict:
