@@ -3,6 +3,8 @@
 gearte run CONFIG.toml --out DIR [--samples N] [--seed S] [--chunk-size C] [--progress/--no-progress] [--yes]
 gearte compare RUN_DIR [RUN_DIR ...] --out DIR
 gearte check CONFIG.toml [--samples N] [--seed S] [--chunk-size C]
+gearte identify STUDY.toml RECORD.csv --out DIR
+gearte assemble PARTS.csv --study STUDY.toml --out DIR
 gearte grade --standard {1328-1:2013,1328-1:1995} --module M --diameter D [--face-width B] [--teeth Z] --grade G
 """
 
@@ -21,6 +23,7 @@ from ..core.schema import ConfigError
 from ..standards.iso1328 import iso1328_tolerances
 from .compare import compare_runs
 from .config import Study, load_study
+from .identify_cmd import add_parsers as _identify_parsers
 from .io import OutputError, check_output, interrupt_received, reset_interrupts, sigterm_as_interrupt
 from .run import CONFIRM_BYTES, CONFIRM_SECONDS, estimate_cost, run_study
 
@@ -126,6 +129,7 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--face-width", type=float, help="face width b, mm (needed for F_beta; F_beta is null without it)")
     g.add_argument("--teeth", type=int, help="number of teeth z (optional; range-checked only)")
     g.add_argument("--grade", required=True, type=int, help="whole accuracy grade")
+    _identify_parsers(sub)
     return p
 
 
@@ -202,6 +206,11 @@ def _main(argv: list[str] | None) -> int:
             + ")"
         )
         return 0
+    if args.command in ("identify", "assemble"):
+        from . import identify_cmd
+
+        command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
+        return (identify_cmd.run_identify if args.command == "identify" else identify_cmd.run_assemble)(args, command)
     if args.command == "compare":
         compare_runs(args.runs, args.out)
         print(f"comparison written to {args.out}/report.md")
