@@ -93,7 +93,7 @@ def test_coverage_of_95_percent_intervals(planetary):
 
 
 def test_second_record_with_a_turn_separates_the_combined_phasor(planetary):
-    errs, clean, _ = planetary
+    errs, _clean, _ = planetary
     turns = [{}, {"sun_assembly": math.pi / 2}, {"carrier_assembly": 2.0}]
     recs = [synthetic_record(PLANETARY, errs, key=0, revolutions=REVS, points_per_rev=PPR, turns=t) for t in turns]
     sol = identify(PLANETARY, recs, turns=turns)
@@ -148,7 +148,7 @@ def test_jacobian_matches_finite_differences(planetary):
 
 
 def test_reassembly_predicts_lower_te(planetary):
-    errs, clean, problem = planetary
+    _errs, clean, problem = planetary
     sol = _solve(problem, [jnp.asarray(clean.te)], jax.random.key(0))
     alloc = reassemble(PLANETARY, sol, adjust={"sun_manufacturing": None, "planet_manufacturing": None}, starts=4)
     assert float(alloc.te) < float(alloc.te_before)

@@ -19,7 +19,7 @@ def test_identify_writes_its_folder(tmp_path):
     # the example's true sun eccentricity (examples/records/make_records.py): 13 µm at 0.6 rad
     lo, hi = rows["sun_manufacturing"]["magnitude_95_um"]
     assert lo <= 13.0 <= hi
-    assert [g["kind"] for g in s["groups"]][0] == "combined"
+    assert next(g["kind"] for g in s["groups"]) == "combined"
 
 
 def test_bad_record_and_parts_are_refused(tmp_path, capsys):

@@ -15,7 +15,7 @@ from .. import __version__
 from ..core.schema import ConfigError
 from ..core.solution import result_name
 from ..core.units import UNIT_SYMBOLS, angle_from_rad
-from ..drives.protocol import Eccentricity
+from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
 from ..identify import assemble_batch, diagnose, identification_problem, read_record, reassemble
 from ..identify.identification import Z95, _solve
 from ..studies.montecarlo import as_key
@@ -54,10 +54,20 @@ def _units(items: list[str]) -> dict[str, str]:
     return out
 
 
+def _sinusoidal(study, path) -> AbstractSinusoidalDrive:
+    if not isinstance(study.drive, AbstractSinusoidalDrive):
+        raise ConfigError(
+            f"{path}: [drive] type = {study.drive.type_name!r} computes its TE on a grid; identification and assembly need a drive "
+            "whose TE is a sum of sinusoids (planetary_2kh, harmonic, explicit)"
+        )
+    return study.drive
+
+
 def run_identify(args, command: str) -> int:
     study = load_study(args.config)
-    drive = study.drive
-    ratio = args.ratio if args.ratio is not None else (float(drive.ratio) if hasattr(drive, "ratio") else None)
+    drive = _sinusoidal(study, args.config)
+    given = getattr(drive, "ratio", None)
+    ratio = args.ratio if args.ratio is not None else (float(given) if given is not None else None)
     rec = read_record(args.record, units=_units(args.unit), input_rpm=args.input_rpm, ratio=ratio)
     adjust = {s.strip(): None for s in args.adjust.split(",") if s.strip()}
     with atomic_output_dir(args.out, inputs=[args.config, args.record]) as tmp:
@@ -231,7 +241,7 @@ def _read_parts(path: str, drive) -> dict[str, Eccentricity]:
 
 def run_assemble(args, command: str) -> int:
     study = load_study(args.study)
-    drive = study.drive
+    drive = _sinusoidal(study, args.study)
     parts = _read_parts(args.parts, drive)
     with atomic_output_dir(args.out, inputs=[args.study, args.parts]) as tmp:
         out = assemble_batch(drive, parts, key=args.seed, metric=study.metric, random_batches=args.random_batches)

@@ -26,6 +26,7 @@ import io
 import math
 from collections.abc import Mapping
 from pathlib import Path
+from typing import NoReturn
 
 import equinox as eqx
 import jax
@@ -89,7 +90,7 @@ class MeasuredRecord(eqx.Module):
         return Record(time=t, theta=np.asarray(self.theta), te=np.asarray(self.te), input_rpm=rpm, sample_rate_hz=1.0 / float(t[1]))
 
 
-def _fail(source: str, msg: str):
+def _fail(source: str, msg: str) -> NoReturn:
     raise RecordError(f"{source}: {msg}")
 
 
