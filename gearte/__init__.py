@@ -62,7 +62,7 @@ from .drives import (
     Planetary2KH as Planetary2KH,
     SourceSpec as SourceSpec,
 )
-from .identify import (
+from .identification import (
     BatchAssembly as BatchAssembly,
     Diagnosis as Diagnosis,
     Identification as Identification,

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import gearte
-from gearte.identify import assemble_batch
+from gearte.identification import assemble_batch
 
 DRIVE = gearte.Planetary2KH(12, 36, 84, module=1.0, pressure_angle=np.pi / 9, n_planets=1)
 SOURCES = ("sun_manufacturing", "planet_manufacturing", "ring_manufacturing")

@@ -11,9 +11,9 @@ import pytest
 
 import gearte
 from gearte.cli.config import load_study
-from gearte.identify import RecordError, diagnose, identification_problem, identify, read_record, reassemble, synthetic_record
-from gearte.identify.identification import Z95, _solve
-from gearte.identify.records import encoder_noise, write_record
+from gearte.identification import RecordError, diagnose, identification_problem, identify, read_record, reassemble, synthetic_record
+from gearte.identification.fit import Z95, _solve
+from gearte.identification.records import encoder_noise, write_record
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANETARY = load_study(ROOT / "examples" / "planetary_wang2013_random.toml").drive

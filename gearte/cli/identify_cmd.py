@@ -16,8 +16,8 @@ from ..core.schema import ConfigError
 from ..core.solution import result_name
 from ..core.units import UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
-from ..identify import assemble_batch, diagnose, identification_problem, read_record, reassemble
-from ..identify.identification import Z95, _solve
+from ..identification import assemble_batch, diagnose, identification_problem, read_record, reassemble
+from ..identification.fit import Z95, _solve
 from ..studies.montecarlo import as_key
 from .config import load_study
 from .io import atomic_output_dir, write_json, written_files

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core.records import spectral_lines
-from .identification import Identification, IdentificationProblem, _basis, signal_coefficients
+from .fit import Identification, IdentificationProblem, _basis, signal_coefficients
 from .records import MeasuredRecord
 
 

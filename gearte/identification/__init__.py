@@ -7,19 +7,19 @@ from .assembly import reassemble as reassemble
 from .diagnosis import Diagnosis as Diagnosis
 from .diagnosis import LineDiagnosis as LineDiagnosis
 from .diagnosis import diagnose as diagnose
-from .identification import (
+from .fit import (
     Group as Group,
 )
-from .identification import (
+from .fit import (
     Identification as Identification,
 )
-from .identification import (
+from .fit import (
     IdentificationProblem as IdentificationProblem,
 )
-from .identification import (
+from .fit import (
     identification_problem as identification_problem,
 )
-from .identification import (
+from .fit import (
     identify as identify,
 )
 from .records import (

@@ -1,5 +1,5 @@
 """Which instances a set of records can identify: the model's Jacobian in coefficient space, column by column
-(see `gearte.identify.identification`)."""
+(see `gearte.identification.fit`)."""
 
 from __future__ import annotations
 

@@ -40,7 +40,7 @@ from ..core.units import TWO_PI
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
 from ..optimise.allocation_measured import MeasuredAllocation, allocate_measured
 from ..studies.montecarlo import as_key
-from .identification import Identification
+from .fit import Identification
 
 
 def reassemble(
