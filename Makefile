@@ -8,7 +8,7 @@ OUT    ?= out
 .PHONY: demo test lint bench clean help
 
 help:
-	@echo "make demo   - set up .venv, run the flagship planetary study, write a report under $(OUT)/"
+	@echo "make demo   - set up .venv, run three planetary studies (Wang et al. 2013) and compare them, report in $(OUT)/comparison/"
 	@echo "make test   - set up .venv, check lint (ruff) and types (basedpyright), run the whole test suite (notebooks included)"
 	@echo "make bench  - run the benchmarks, tables in benchmarks/results/"
 
@@ -27,6 +27,7 @@ demo: $(STAMP)
 	@echo
 	@echo "Demo finished. Open $(OUT)/comparison/report.md (plots beside it);"
 	@echo "each study's own report is $(OUT)/<study>/report.md."
+	@echo "To run gearte yourself: . $(VENV)/bin/activate (or call $(BIN)/gearte)."
 
 lint: $(STAMP)
 	$(BIN)/ruff check gearte tests benchmarks

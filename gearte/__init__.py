@@ -62,6 +62,22 @@ from .drives import (
     Planetary2KH as Planetary2KH,
     SourceSpec as SourceSpec,
 )
+from .identification import (
+    BatchAssembly as BatchAssembly,
+    Diagnosis as Diagnosis,
+    Identification as Identification,
+    IdentificationProblem as IdentificationProblem,
+    MeasuredRecord as MeasuredRecord,
+    RecordError as RecordError,
+    assemble_batch as assemble_batch,
+    diagnose as diagnose,
+    identification_problem as identification_problem,
+    identify as identify,
+    read_record as read_record,
+    reassemble as reassemble,
+    synthetic_record as synthetic_record,
+    write_record as write_record,
+)
 from .optimise.allocation import (
     RuleAllocation as RuleAllocation,
     RuleProblem as RuleProblem,

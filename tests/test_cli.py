@@ -119,7 +119,13 @@ BAD = {
         {"__append__": '\n[errors.ring_assembly]\ntolerance_um = 1\nmagnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n'},
         "unknown error source `ring_assembly`",
     ),
-    "missing source": ({"[errors.carrier_assembly]": "[unused]"}, "missing error source(s) ['carrier_assembly']"),
+    "missing source": (
+        {
+            '[errors.carrier_assembly]   # (A_c, γ_c), Table 1\ntolerance_um = 15\nmagnitude = { law = "fixed" }\nphase = { rule = "uniform" }': ""
+        },
+        "missing error source(s) ['carrier_assembly']",
+    ),
+    "unknown table": ({"[errors.carrier_assembly]": "[unused]"}, "study file: unknown table `[unused]`"),
     "bad law": (
         {
             'magnitude = { law = "fixed" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]': 'magnitude = { law = "rayleig" }\nphase = { rule = "uniform" }\n\n[errors.planet_manufacturing]'

@@ -25,7 +25,7 @@ def random_study():
 @settings(max_examples=8, deadline=None)
 @given(st.integers(1, 700))
 def test_results_do_not_depend_on_chunk_size(random_study, chunk):
-    # Blocks of 64: chunks from one block per call to many, against one call for everything.
+    # Blocks of 64: progress every block or every many blocks, against one chunk for everything.
     a = gearte.monte_carlo(random_study, key=7, n_samples=1000, chunk_size=chunk, block_size=64).values
     b = gearte.monte_carlo(random_study, key=7, n_samples=1000, chunk_size=1024, block_size=64).values
     np.testing.assert_array_equal(a, b)
@@ -40,7 +40,7 @@ def test_one_block_and_many_blocks_per_call_agree_bitwise(random_study, chunk):
 
 def test_progress_bar_shows_on_request_and_changes_nothing(random_study, capsys):
     # The progress bar (tqdm, on stderr) is shown when asked for, never when stderr is not a terminal
-    # by default, and it changes no value. (Blocks of 64, two per call: the program compiled above.)
+    # by default, and it changes no value. (Blocks of 64: the program compiled above.)
     kw = dict(key=7, n_samples=300, chunk_size=128, block_size=64)
     quiet = gearte.monte_carlo(random_study, **kw).values
     assert "samples" not in capsys.readouterr().err
@@ -115,6 +115,10 @@ def test_one_compilation_for_repeated_runs():
     study = Counting(s.drive, s.errors)
     gearte.monte_carlo(study, key=1, n_samples=500, chunk_size=128)
     gearte.monte_carlo(study, key=2, n_samples=1000, chunk_size=128)
+    # Other sample counts and chunk sizes (one block, or many blocks between progress updates): still the
+    # one compiled block.
+    gearte.monte_carlo(study, key=3, n_samples=37, chunk_size=4096)
+    gearte.monte_carlo(study, key=4, n_samples=20_000)
     assert len(traces) == 1
 
 

@@ -1,73 +1,190 @@
-"""``gearte compare``: finished runs side by side (statistics table, overlaid histograms)."""
+"""``gearte compare``: finished runs side by side (statistics table, overlaid histograms).
+
+Runs are compared on what they share: one metric (the runs may be of different drives, and
+angles in different units are converted to the first run's unit). Every run folder is read
+defensively: a file, a damaged `summary.json` or `samples.npz`, or a missing field is refused
+with a message naming the file; `samples.npz` is read without pickles.
+"""
 
 from __future__ import annotations
 
 import json
+import math
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from ..core.units import UNIT_SYMBOLS
+from .. import __version__
+from ..core.units import ANGLE_UNITS, UNIT_SYMBOLS, angle_from_rad
 from . import plots
-from .io import atomic_output_dir, write_json
+from .io import atomic_output_dir, check_output, write_json, written_files
+
+#: The fields of a run's summary.json that a comparison reads (dotted paths).
+_FIELDS = (
+    "study.name",
+    "study.title",
+    "te.unit",
+    "te.metric",
+    "te.n",
+    "te.min",
+    "te.max",
+    "te.mean",
+    "te.std",
+    "te.percentiles.99.73",
+)
+
+
+class RunFolderError(ValueError):
+    """A folder given to `gearte compare` is not a readable finished run."""
 
 
 def _fmt(x: float) -> str:
     return f"{x:.2f}"
 
 
-def compare_runs(run_dirs: list[str | Path], out: str | Path) -> dict:
-    """Compare finished runs: a table of their statistics and overlaid histograms, written atomically to `out`."""
-    runs = []
-    for d in run_dirs:
-        d = Path(d)
+def _field(summary: dict, dotted: str, file: Path):
+    # Percentile keys contain a dot ("99.73"): walk the known prefix, then take the rest as one key.
+    head, _, rest = dotted.partition(".")
+    v = summary.get(head) if isinstance(summary, dict) else None
+    if rest.startswith("percentiles."):
+        v = v.get("percentiles") if isinstance(v, dict) else None
+        rest = rest.removeprefix("percentiles.")
+    if isinstance(v, dict) and rest:
+        v = v.get(rest)
+    if v is None:
+        raise RunFolderError(f"{file}: missing `{dotted}`; not a summary written by `gearte run` (run the study again)")
+    if dotted.startswith("te.") and dotted not in ("te.unit", "te.metric"):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise RunFolderError(f"{file}: `{dotted}` must be a finite number, got {v!r}")
+    elif dotted in ("study.name", "study.title", "te.unit", "te.metric") and not isinstance(v, str):
+        raise RunFolderError(f"{file}: `{dotted}` must be a string, got {v!r}")
+    return v
+
+
+def read_run(folder: str | Path) -> tuple[dict, np.ndarray, np.ndarray | None]:
+    """A finished run's summary, its per-sample values (`te`, in the summary's unit) and `te_rad` (None if absent)."""
+    d = Path(folder)
+    if not d.exists():
+        raise RunFolderError(f"{d}: no such folder; give the results folder of a `gearte run`")
+    if not d.is_dir():
+        raise RunFolderError(f"{d}: a file, not a results folder; give the folder that `gearte run --out` wrote")
+    sj = d / "summary.json"
+    if not sj.is_file():
+        if (d / "comparison.json").is_file():
+            raise RunFolderError(f"{d}: a comparison, not a run; compare the run folders it compared")
+        raise RunFolderError(f"{d}: not a finished gearte run (no summary.json); run `gearte run` first")
+    try:
+        summary = json.loads(sj.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise RunFolderError(f"{sj}: not UTF-8 text; the file is damaged (run the study again)") from None
+    except json.JSONDecodeError as e:
+        raise RunFolderError(
+            f"{sj}: not valid JSON ({e.msg}, line {e.lineno} column {e.colno}); the file is damaged (run the study again)"
+        ) from None
+    except OSError as e:
+        raise RunFolderError(f"{sj}: cannot read ({e.strerror})") from None
+    if not isinstance(summary, dict):
+        raise RunFolderError(f"{sj}: expected a JSON object, got {type(summary).__name__}; not a summary written by `gearte run`")
+    for f in _FIELDS:
+        _field(summary, f, sj)
+    npz = d / "samples.npz"
+    if not npz.is_file():
+        raise RunFolderError(f"{d}: not a finished gearte run (no samples.npz); run `gearte run` first")
+    damaged = f"{npz}: cannot be read as a NumPy .npz archive of numbers; the file is damaged (run the study again)"
+    try:
+        z = np.load(npz, allow_pickle=False)  # never pickles: a results folder may come from anywhere
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+        raise RunFolderError(damaged) from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise RunFolderError(damaged)
+    with z:
+        if "te" not in z.files:
+            raise RunFolderError(f"{npz}: has no `te` array; not written by `gearte run` (run the study again)")
         try:
-            summ = json.loads((d / "summary.json").read_text(encoding="utf-8"))
-            with np.load(d / "samples.npz") as z:
-                vals = np.asarray(z["te"])
-        except FileNotFoundError as e:
-            raise ValueError(f"{d}: not a finished gearte run (missing {Path(e.filename).name}); run `gearte run` first") from None
-        runs.append((d, summ, vals))
-    units = {r[1]["te"]["unit"] for r in runs}
+            te = np.asarray(z["te"])
+            te_rad = np.asarray(z["te_rad"]) if "te_rad" in z.files else None
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
+            raise RunFolderError(damaged) from None
+    n = summary["te"]["n"]
+    for name, arr in (("te", te), ("te_rad", te_rad)):
+        if arr is None:
+            continue
+        if arr.dtype.kind not in "fiu" or arr.shape != (n,) or not np.all(np.isfinite(arr)):
+            raise RunFolderError(
+                f"{npz}: `{name}` must hold {n:,} finite numbers (te.n of summary.json), got {arr.dtype} of shape {arr.shape}"
+            )
+    return summary, te.astype(float), None if te_rad is None else te_rad.astype(float)
+
+
+def compare_runs(run_dirs: list[str | Path], out: str | Path) -> dict:
+    """Compare finished runs: a table of their statistics and overlaid histograms, written atomically to `out`.
+
+    The runs must share one metric; they may be of different drives, and angles in different units are
+    shown in the first run's unit. `out` is refused when it is, holds or lies inside one of the runs.
+    """
+    check_output(out, inputs=run_dirs)
+    runs = [(Path(d), *read_run(d)) for d in run_dirs]
     metrics = {r[1]["te"]["metric"] for r in runs}
-    if len(units) > 1 or len(metrics) > 1:
-        raise ValueError(f"runs differ in unit {sorted(units)} or metric {sorted(metrics)}; compare like with like")
-    unit, metric = units.pop(), metrics.pop()
-    sym = UNIT_SYMBOLS[unit]
-    base = runs[0][1]["te"]["mean"]
-    rows = []
-    for d, summ, _ in runs:
+    if len(metrics) > 1:
+        listed = ", ".join(f"{r[1]['te']['metric']} ({r[0]})" for r in runs)
+        raise RunFolderError(f"the runs measure different metrics: {listed}; compare runs of one metric ([study] metric)")
+    metric = metrics.pop()
+    unit = runs[0][1]["te"]["unit"]
+    units = {r[1]["te"]["unit"] for r in runs}
+    if len(units) > 1 and not all(u in ANGLE_UNITS for u in units):
+        raise RunFolderError(f"the runs are in units {sorted(units)} that cannot be converted into each other; compare like with like")
+    drives = sorted({str((r[1].get("drive") or {}).get("type", "?")) for r in runs})
+    sym = UNIT_SYMBOLS.get(unit, f" {unit}")
+    rows, series = [], []
+    base = None
+    for d, summ, te_values, te_rad in runs:
         te = summ["te"]
+        u = te["unit"]
+        if u == unit:
+            conv, values = 1.0, te_values
+        else:  # another angle unit: through rad
+            conv = float(angle_from_rad(1.0, unit)) / float(angle_from_rad(1.0, u))
+            values = np.asarray(angle_from_rad(te_rad, unit)) if te_rad is not None else te_values * conv
+        if base is None:
+            base = te["mean"] * conv
         rows.append(
             {
                 "run": str(d),
                 "name": summ["study"]["name"],
                 "title": summ["study"]["title"],
+                "drive": str((summ.get("drive") or {}).get("type", "?")),
                 "n": te["n"],
-                "min": te["min"],
-                "max": te["max"],
-                "mean": te["mean"],
-                "std": te["std"],
-                "p99.73": te["percentiles"]["99.73"],
-                "mean_vs_first": te["mean"] / base if base else float("nan"),
+                "min": te["min"] * conv,
+                "max": te["max"] * conv,
+                "mean": te["mean"] * conv,
+                "std": te["std"] * conv,
+                "p99.73": te["percentiles"]["99.73"] * conv,
+                "mean_vs_first": te["mean"] * conv / base if base else float("nan"),
             }
         )
-    result = {"unit": unit, "metric": metric, "runs": rows}
-    with atomic_output_dir(out) as tmp:
-        series = [(r["title"], v) for r, (_, _, v) in zip(rows, runs)]
+        series.append((summ["study"]["title"], values))
+    result = {"gearte_version": __version__, "unit": unit, "metric": metric, "drives": drives, "runs": rows}
+    with atomic_output_dir(out, inputs=run_dirs) as tmp:
         plots.overlay_histograms(series, unit=unit, metric=metric, path=tmp / "overlay.png")
         plots.grid_of_histograms(series, unit=unit, metric=metric, path=tmp / "histograms.png")
         lines = [
             "# Comparison of TE studies",
             "",
-            f"Metric: {metric}; unit {unit} ({sym}).",
+            f"Metric: {metric}; unit {unit} ({sym.strip()}).",
             "",
-            "| study | n | min | max | mean | std | P99.73 | mean / first |",
-            "|---|---|---|---|---|---|---|---|",
+        ]
+        if len(drives) > 1:
+            lines += [f"The runs are of different drives ({', '.join(drives)}); they are compared on the metric they share.", ""]
+        if len(units) > 1:
+            lines += [f"Runs in other units ({', '.join(sorted(units - {unit}))}) are converted to {unit}.", ""]
+        lines += [
+            "| study | drive | n | min | max | mean | std | P99.73 | mean / first |",
+            "|---|---|---|---|---|---|---|---|---|",
         ]
         for r in rows:
             lines.append(
-                f"| {r['title']} (`{r['run']}`) | {r['n']:,} | {_fmt(r['min'])} | {_fmt(r['max'])} | {_fmt(r['mean'])} | "
+                f"| {r['title']} (`{r['run']}`) | {r['drive']} | {r['n']:,} | {_fmt(r['min'])} | {_fmt(r['max'])} | {_fmt(r['mean'])} | "
                 f"{_fmt(r['std'])} | {_fmt(r['p99.73'])} | {r['mean_vs_first']:.3f} |"
             )
         lines += [
@@ -80,5 +197,6 @@ def compare_runs(run_dirs: list[str | Path], out: str | Path) -> dict:
             "",
         ]
         (tmp / "report.md").write_text("\n".join(lines), encoding="utf-8")
+        result["files"] = written_files(tmp, "comparison.json")
         write_json(tmp / "comparison.json", result)
     return result

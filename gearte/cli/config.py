@@ -153,6 +153,16 @@ def load_study(path: str | Path, *, samples: int | None = None, seed: int | None
 def build_study(raw: dict, source: str, *, samples: int | None = None, seed: int | None = None) -> Study:
     """A `Study` from parsed TOML (`source` names it in messages and reports)."""
     top = Table(raw, "study file")
+    # Unknown tables first: a misspelt [errors] or [budget] would otherwise be reported as missing.
+    allowed = ["study", "drive", "errors", *(k.table for k in STUDY_KINDS)]
+    for k in raw:
+        if k not in allowed:
+            hint = difflib.get_close_matches(k, allowed, n=1)
+            raise ConfigError(
+                f"study file: unknown table `[{k}]`"
+                + (f" (did you mean `[{hint[0]}]`?)" if hint else "")
+                + f"; allowed: {', '.join(f'[{a}]' for a in allowed)}"
+            )
     st = top.table("study")
     h = study_header(st, samples=samples, seed=seed)
 
@@ -344,6 +354,11 @@ def _magnitude(t: Table, tol: float | None) -> AbstractLaw:
         scale = t.number("scale_um", positive=True)
     elif t.has("scale_fraction"):
         scale = t.number("scale_fraction", positive=True) * need_tol("scale_fraction")
+        if not scale > 0:
+            raise ConfigError(
+                f"{t.where} scale_fraction: × tolerance_um {need_tol('scale_fraction'):g} µm gives a Rayleigh scale of 0; "
+                "give the source a tolerance_um > 0, or `scale_um`"
+            )
     else:
         raise ConfigError(f"{t.where}: a Rayleigh law needs `scale_um`, or `scale_fraction` (scale = fraction × tolerance_um)")
     trunc = None

@@ -1,8 +1,10 @@
 """The `gearte` command line.
 
-gearte run CONFIG.toml --out DIR [--samples N] [--seed S] [--chunk-size C] [--progress/--no-progress]
+gearte run CONFIG.toml --out DIR [--samples N] [--seed S] [--chunk-size C] [--progress/--no-progress] [--yes]
 gearte compare RUN_DIR [RUN_DIR ...] --out DIR
-gearte check CONFIG.toml
+gearte check CONFIG.toml [--samples N] [--seed S] [--chunk-size C]
+gearte identify STUDY.toml RECORD.csv --out DIR
+gearte assemble PARTS.csv --study STUDY.toml --out DIR
 gearte grade --standard {1328-1:2013,1328-1:1995} --module M --diameter D [--face-width B] [--teeth Z] --grade G
 """
 
@@ -12,6 +14,7 @@ import argparse
 import dataclasses
 import json
 import shlex
+import signal
 import sys
 
 from .. import __version__
@@ -19,9 +22,10 @@ from ..core.precision import enable_x64
 from ..core.schema import ConfigError
 from ..standards.iso1328 import iso1328_tolerances
 from .compare import compare_runs
-from .config import load_study
-from .io import sigterm_as_interrupt
-from .run import run_study
+from .config import Study, load_study
+from .identify_cmd import add_parsers as _identify_parsers
+from .io import OutputError, check_output, interrupt_received, reset_interrupts, sigterm_as_interrupt
+from .run import CONFIRM_BYTES, CONFIRM_SECONDS, estimate_cost, run_study
 
 
 def _positive_int(text: str) -> int:
@@ -44,6 +48,53 @@ def _seed(text: str) -> int:
     return v
 
 
+def _overrides(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--samples", type=_positive_int, help="number of Monte Carlo samples (overrides the file)")
+    p.add_argument("--seed", type=_seed, help="random seed (overrides the file)")
+    p.add_argument("--chunk-size", type=_positive_int, help="samples between progress updates (results do not change)")
+
+
+def _study(args) -> Study:
+    study = load_study(args.config, samples=args.samples, seed=args.seed)
+    if args.chunk_size is not None:
+        study = dataclasses.replace(study, chunk_size=args.chunk_size)
+    return study
+
+
+def _size(n: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1024
+    raise AssertionError
+
+
+def _duration(s: float) -> str:
+    if s < 120:
+        return f"{s:.0f} s"
+    if s < 7200:
+        return f"{s / 60:.0f} min"
+    if s < 2 * 86400:
+        return f"{s / 3600:.1f} h"
+    return f"{s / 86400:.1f} days"
+
+
+def _confirm(args, study: Study) -> None:
+    """Estimate a large run before starting it; refuse one above the thresholds without --yes."""
+    cost = estimate_cost(study)
+    if cost.seconds is None:
+        return
+    where = f"--samples {study.samples:,}" if args.samples is not None else f"{args.config}: [study] samples = {study.samples:,}"
+    what = (
+        f"about {_duration(cost.seconds)} of Monte Carlo at {cost.rate:,.0f} samples/s on this machine (study kinds not "
+        f"included), and {_size(cost.bytes)} of per-sample results held in memory and written to samples.npz"
+    )
+    if cost.seconds > CONFIRM_SECONDS or cost.bytes > CONFIRM_BYTES:
+        if not args.yes:
+            raise OutputError(f"{where}: {what}; add --yes to run it anyway, or give fewer samples")
+    print(f"gearte: {where}: {what}", file=sys.stderr)
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="gearte", description="Transmission error of gear drives from their manufacturing and assembly errors."
@@ -52,16 +103,20 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run a study file and write its results folder")
     r.add_argument("config", help="study file (TOML)")
-    r.add_argument("--out", required=True, help="results folder (written atomically; replaced if it exists)")
-    r.add_argument("--samples", type=_positive_int, help="number of Monte Carlo samples (overrides the file)")
-    r.add_argument("--seed", type=_seed, help="random seed (overrides the file)")
-    r.add_argument("--chunk-size", type=_positive_int, help="samples per compiled batch (memory bound; results do not change)")
+    r.add_argument(
+        "--out",
+        required=True,
+        help="results folder: new, empty, or an earlier gearte result (replaced atomically); a folder with other files is refused",
+    )
+    _overrides(r)
     r.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar (default: on a terminal)")
+    r.add_argument("--yes", action="store_true", help="run even when the estimated time or size is large (asked above 15 min or 2 GiB)")
     c = sub.add_parser("compare", help="compare finished runs side by side")
     c.add_argument("runs", nargs="+", help="results folders of `gearte run`")
-    c.add_argument("--out", required=True, help="folder for the comparison report")
-    k = sub.add_parser("check", help="validate a study file without running it")
+    c.add_argument("--out", required=True, help="folder for the comparison report (not one of the runs)")
+    k = sub.add_parser("check", help="validate a study file without running it (every check `run` makes before computing)")
     k.add_argument("config")
+    _overrides(k)
     g = sub.add_parser("grade", help="ISO 1328 tolerances (µm) of an accuracy grade, as JSON")
     g.add_argument(
         "--standard",
@@ -74,71 +129,105 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--face-width", type=float, help="face width b, mm (needed for F_beta; F_beta is null without it)")
     g.add_argument("--teeth", type=int, help="number of teeth z (optional; range-checked only)")
     g.add_argument("--grade", required=True, type=int, help="whole accuracy grade")
+    _identify_parsers(sub)
     return p
 
 
+def _interrupted(done: bool) -> int:
+    signum = interrupt_received() or getattr(sys.exc_info()[1], "signum", None) or signal.SIGINT
+    what = "after the command had finished" if done else "no results were written; an earlier result is untouched"
+    print(f"gearte: interrupted ({signal.Signals(signum).name}); {what}", file=sys.stderr)
+    return 128 + signum
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the `gearte` command line; returns the exit status (2 for bad input, 130 when interrupted)."""
-    args = _parser().parse_args(argv)
-    # gearte's geometry needs float64; the command line turns it on before any array exists.
-    enable_x64()
+    """Run the `gearte` command line; returns the exit status (2 for bad input, 128 + the signal when
+    interrupted: 130 for Ctrl-C, 143 for SIGTERM)."""
+    reset_interrupts()
+    done = False
     try:
         with sigterm_as_interrupt():
-            if args.command == "grade":
-                tol = iso1328_tolerances(
-                    standard=args.standard,
-                    module=args.module,
-                    diameter=args.diameter,
-                    face_width=args.face_width,
-                    grade=args.grade,
-                    teeth=args.teeth,
-                )
-                out = {
-                    "standard": args.standard,
-                    "grade": args.grade,
-                    "module_mm": args.module,
-                    "diameter_mm": args.diameter,
-                    "face_width_mm": args.face_width,
-                    "unit": "um",
-                }
-                out.update({k: tol.get(k) for k in ("f_pt", "F_p", "F_alpha", "F_beta", "F_r")})
-                print(json.dumps(out, ensure_ascii=False))
-                return 0
-            if args.command == "check":
-                study = load_study(args.config)
-                print(
-                    f"{args.config}: OK ({study.name}: {type(study.drive).__name__}, {len(study.errors.specs)} error sources, "
-                    f"metric {study.metric.name}, {study.samples:,} samples, seed {study.seed}"
-                    + (f"; {', '.join(f'[{k}]' for k in study.kinds)}" if study.kinds else "")
-                    + ")"
-                )
-                return 0
-            if args.command == "compare":
-                compare_runs(args.runs, args.out)
-                print(f"comparison written to {args.out}/report.md")
-                return 0
-            study = load_study(args.config, samples=args.samples, seed=args.seed)
-            if args.chunk_size is not None:
-                study = dataclasses.replace(study, chunk_size=args.chunk_size)
-            command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
-            summary = run_study(study, args.out, progress=args.progress, command=command)
-            te = summary["te"]
-            sym = {"arcsec": "″", "arcmin": "′", "urad": " µrad", "pairs": " pairs"}[te["unit"]]
-            print(
-                f"{study.name}: {te['metric']} over {te['n']:,} samples: mean {te['mean']:.2f}{sym}, std {te['std']:.2f}{sym}, "
-                f"min {te['min']:.2f}{sym}, max {te['max']:.2f}{sym}, P99.73 {te['percentiles']['99.73']:.2f}{sym}"
-            )
-            print(f"report: {args.out}/report.md")
-            return 0
+            status = _main(argv)
+            done = True
+            if interrupt_received() is not None:
+                raise KeyboardInterrupt
+            return status
     except ConfigError as e:
         print(f"gearte: error in config: {e}", file=sys.stderr)
         return 2
-    except (ValueError, FileExistsError) as e:
+    except ValueError as e:  # OutputError and the library's argument checks
         print(f"gearte: error: {e}", file=sys.stderr)
         return 2
+    except OSError as e:
+        print(f"gearte: error: {e.filename or ''}{': ' if e.filename else ''}{e.strerror or e}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
-        print("gearte: interrupted; no results were written", file=sys.stderr)
-        return 130
+        return _interrupted(done)
+    except Exception:
+        # An interrupt raised inside a compiled extension (e.g. while a module is imported) can come out as
+        # another exception; the signal was remembered, so it is reported as what it is.
+        if interrupt_received() is not None:
+            return _interrupted(done)
+        raise
+    finally:
+        reset_interrupts()
+
+
+def _main(argv: list[str] | None) -> int:
+    args = _parser().parse_args(argv)
+    # gearte's geometry needs float64; the command line turns it on before any array exists.
+    enable_x64()
+    if args.command == "grade":
+        tol = iso1328_tolerances(
+            standard=args.standard,
+            module=args.module,
+            diameter=args.diameter,
+            face_width=args.face_width,
+            grade=args.grade,
+            teeth=args.teeth,
+        )
+        out = {
+            "standard": args.standard,
+            "grade": args.grade,
+            "module_mm": args.module,
+            "diameter_mm": args.diameter,
+            "face_width_mm": args.face_width,
+            "unit": "um",
+        }
+        out.update({k: tol.get(k) for k in ("f_pt", "F_p", "F_alpha", "F_beta", "F_r")})
+        print(json.dumps(out, ensure_ascii=False))
+        return 0
+    if args.command == "check":
+        study = _study(args)
+        print(
+            f"{args.config}: OK ({study.name}: {type(study.drive).__name__}, {len(study.errors.specs)} error sources, "
+            f"metric {study.metric.name}, {study.samples:,} samples, seed {study.seed}"
+            + (f"; {', '.join(f'[{k}]' for k in study.kinds)}" if study.kinds else "")
+            + ")"
+        )
+        return 0
+    if args.command in ("identify", "assemble"):
+        from . import identify_cmd
+
+        command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
+        return (identify_cmd.run_identify if args.command == "identify" else identify_cmd.run_assemble)(args, command)
+    if args.command == "compare":
+        compare_runs(args.runs, args.out)
+        print(f"comparison written to {args.out}/report.md")
+        return 0
+    study = _study(args)
+    check_output(args.out, inputs=[args.config])  # before anything is computed
+    _confirm(args, study)
+    command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
+    summary = run_study(study, args.out, progress=args.progress, command=command, inputs=[args.config])
+    te = summary["te"]
+    sym = {"arcsec": "″", "arcmin": "′", "urad": " µrad", "pairs": " pairs"}[te["unit"]]
+    print(
+        f"{study.name}: {te['metric']} over {te['n']:,} samples: mean {te['mean']:.2f}{sym}, std {te['std']:.2f}{sym}, "
+        f"min {te['min']:.2f}{sym}, max {te['max']:.2f}{sym}, P99.73 {te['percentiles']['99.73']:.2f}{sym}"
+    )
+    print(f"report: {args.out}/report.md")
+    return 0
 
 
 if __name__ == "__main__":

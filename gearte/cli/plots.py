@@ -19,9 +19,14 @@ from ..core.units import UNIT_SYMBOLS
 _METRIC_LABEL = {"peak": "peak |Δθ|", "peak_to_peak": "peak-to-peak Δθ", "rms": "RMS Δθ"}
 
 
+def _symbol(unit: str) -> str:
+    """The symbol of an angle unit; other units (loaded pairs) by name."""
+    return UNIT_SYMBOLS.get(unit, f" {unit}")
+
+
 def histogram(values, stats, *, unit: str, metric: str, title: str, path, bins: int = 80, estimate: float | None = None):
     """TE histogram with its statistics written on it."""
-    sym = UNIT_SYMBOLS[unit]
+    sym = _symbol(unit)
     fig = Figure(figsize=(8, 4.8), dpi=110)
     ax = fig.subplots()
     ax.hist(values, bins=bins, color="#4477aa", alpha=0.85, edgecolor="white", linewidth=0.3)
@@ -53,7 +58,7 @@ def histogram(values, stats, *, unit: str, metric: str, title: str, path, bins: 
 
 def trace(theta_rev, te, *, unit: str, title: str, path, marks=()):
     """TE over the hyper-period against input revolutions; `marks` = [(rev, value, label)]."""
-    sym = UNIT_SYMBOLS[unit]
+    sym = _symbol(unit)
     fig = Figure(figsize=(9, 4), dpi=110)
     ax = fig.subplots()
     ax.plot(theta_rev, te, color="#4477aa", linewidth=0.8)
@@ -71,7 +76,7 @@ def trace(theta_rev, te, *, unit: str, title: str, path, marks=()):
 
 def overlay_histograms(series, *, unit: str, metric: str, path, bins: int = 80):
     """Several studies' TE distributions on one axis; `series` = [(label, values)]."""
-    sym = UNIT_SYMBOLS[unit]
+    sym = _symbol(unit)
     fig = Figure(figsize=(9, 5), dpi=110)
     ax = fig.subplots()
     lo = min(float(np.min(v)) for _, v in series)
@@ -91,7 +96,7 @@ def overlay_histograms(series, *, unit: str, metric: str, path, bins: int = 80):
 
 def grid_of_histograms(series, *, unit: str, metric: str, path, bins: int = 60):
     """Histograms side by side, one panel per study; `series` = [(label, values)]."""
-    sym = UNIT_SYMBOLS[unit]
+    sym = _symbol(unit)
     n = len(series)
     cols = min(n, 2)
     rows = math.ceil(n / cols)
@@ -125,7 +130,7 @@ def grid_of_histograms(series, *, unit: str, metric: str, path, bins: int = 60):
 
 def trace_pair(theta_rev, te_a, te_b, *, unit: str, labels, title: str, path):
     """Two TE traces of the same parts over the hyper-period (e.g. before and after allocation)."""
-    sym = UNIT_SYMBOLS[unit]
+    sym = _symbol(unit)
     fig = Figure(figsize=(9, 4), dpi=110)
     ax = fig.subplots()
     for te, label, c in ((te_a, labels[0], "#cc3311"), (te_b, labels[1], "#4477aa")):
@@ -145,7 +150,7 @@ def trace_pair(theta_rev, te_a, te_b, *, unit: str, labels, title: str, path):
 
 def contributions(values: dict, *, unit: str, path, title: str):
     """Horizontal bars: each source's share of a TE statistic."""
-    sym = UNIT_SYMBOLS[unit]
+    sym = _symbol(unit)
     names = list(values)
     v = np.array([values[n] for n in names])
     fig = Figure(figsize=(8, 0.5 * len(names) + 1.5), dpi=110)
@@ -163,7 +168,7 @@ def contributions(values: dict, *, unit: str, path, title: str):
 
 def pareto(rows, *, unit: str, path):
     """Cost against TE spec: optimised budget and uniform scaling of the nominal tolerances."""
-    sym = UNIT_SYMBOLS[unit]
+    sym = _symbol(unit)
     specs = [r[f"spec_{unit}"] for r in rows]
     fig = Figure(figsize=(7, 4.5), dpi=110)
     ax = fig.subplots()

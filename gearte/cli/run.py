@@ -8,6 +8,7 @@ temporary folder that replaces the results folder only when complete.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import importlib
 import math
@@ -24,10 +25,12 @@ from .. import __version__
 from ..core.metrics import AbstractMetric
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import AbstractStudyContext, Figure
-from ..studies.montecarlo import PERCENTILES, TEStudy, as_key, monte_carlo, statistics
+from ..studies.errors import ErrorModel, ErrorSource
+from ..studies.laws import FixedPhase, Optimised
+from ..studies.montecarlo import PERCENTILES, TEStudy, as_key, default_block_size, monte_carlo, statistics
 from . import plots
 from .config import Study
-from .io import atomic_output_dir, write_json
+from .io import atomic_output_dir, commit_point, write_json, written_files
 from .kind_base import Finish, KindOutcome
 from .kinds import STUDY_KINDS
 
@@ -95,8 +98,78 @@ def _draw(figure: Figure, folder: Path) -> None:
     fn(**figure.data, path=folder / figure.filename)
 
 
-def run_study(study: Study, out: str | Path, *, progress: bool | None = None, command: str | None = None) -> dict:
-    """Run `study` and write its results folder `out` atomically. Returns the summary dict."""
+#: Samples above which `gearte run` times the study before starting it (`estimate_cost`).
+MEASURE_ABOVE = 1_000_000
+#: Estimated Monte Carlo time (s) and per-sample results (bytes) above which `gearte run` asks for --yes.
+CONFIRM_SECONDS = 15 * 60
+CONFIRM_BYTES = 2 * 2**30
+
+
+@dataclasses.dataclass(frozen=True)
+class Cost:
+    """What a run will take: `bytes` of per-sample results (held in memory and written to samples.npz,
+    before compression), and, when timed, `seconds` of Monte Carlo at `rate` samples per second."""
+
+    samples: int
+    bytes: int
+    seconds: float | None = None
+    rate: float | None = None
+
+
+def _sampler(study: Study) -> _RunSample:
+    return _RunSample(TEStudy(study.drive, study.errors, metric=study.metric), study.metric)
+
+
+def _phases_to_choose_held(study: Study) -> Study:
+    """The study with every phase an allocation is to choose (`Optimised`) held at 0 rad: the same shapes and cost
+    per sample, before the allocation has run."""
+    src = study.errors.sources
+    if not any(isinstance(s.phase, Optimised) for s in src.values()):
+        return study
+    held = {n: ErrorSource(s.magnitude, FixedPhase(0.0)) if isinstance(s.phase, Optimised) else s for n, s in src.items()}
+    return dataclasses.replace(study, errors=ErrorModel(held, study.errors.specs))
+
+
+def estimate_cost(study: Study, *, measure_above: int | None = None) -> Cost:
+    """Estimate the study's own Monte Carlo (study kinds not included): the per-sample results' size from their
+    shapes, and, above `measure_above` samples, its time from a timed compiled call of two blocks of samples
+    (after a first call that compiles it; a few seconds, more for a grid drive)."""
+    fn = _sampler(_phases_to_choose_held(study))
+    shapes = jax.eval_shape(fn, as_key(0))
+    per = 3 * 8 + sum(int(np.prod(x.shape)) * x.dtype.itemsize for x in jax.tree.leaves(shapes[1]))  # te, te_rad, index
+    nbytes = per * study.samples
+    if study.samples <= (MEASURE_ABOVE if measure_above is None else measure_above):
+        return Cost(study.samples, nbytes)
+    # The smallest compiled call (two blocks), run twice: the second is timed.
+    n = 2 * default_block_size(fn.bytes_per_sample())
+    monte_carlo(fn, key=study.seed, n_samples=n, chunk_size=n, progress=False)
+    t0 = time.perf_counter()
+    monte_carlo(fn, key=study.seed, n_samples=n, chunk_size=n, progress=False)
+    rate = n / max(time.perf_counter() - t0, 1e-9)
+    return Cost(study.samples, nbytes, study.samples / rate, rate)
+
+
+def run_study(
+    study: Study,
+    out: str | Path,
+    *,
+    progress: bool | None = None,
+    command: str | None = None,
+    inputs: tuple[str | Path, ...] | list[str | Path] = (),
+) -> dict:
+    """Run `study` and write its results folder `out` atomically. Returns the summary dict.
+
+    `out` is checked before anything is computed (`gearte.cli.io.check_output`: never a folder holding
+    files gearte did not write, nor one of `inputs`); the results are written into a temporary folder
+    beside it that replaces it only when complete.
+    """
+    with atomic_output_dir(out, inputs=(study.source_path, *inputs)) as tmp:
+        summary = _run(study, tmp, progress=progress, command=command)
+        commit_point()
+    return summary
+
+
+def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None) -> dict:
     t_start = time.perf_counter()
     original = study
     outcomes: list[KindOutcome] = []
@@ -104,9 +177,11 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
         if kind.table in study.kinds:
             outcome = kind.run(study, study.kinds[kind.table], progress=progress)
             outcomes.append(outcome)
+            commit_point()  # an interrupt swallowed while compiling stops the run at the next phase
             study = outcome.study
+    commit_point()
     mc = monte_carlo(
-        _RunSample(TEStudy(study.drive, study.errors, metric=study.metric), study.metric),
+        _sampler(study),
         key=study.seed,
         n_samples=study.samples,
         chunk_size=study.chunk_size,
@@ -186,44 +261,46 @@ def run_study(study: Study, out: str | Path, *, progress: bool | None = None, co
     if original.errors is not study.errors and "allocation" not in summary:
         summary["study"]["source_rules"] = {n: s.phase.describe() for n, s in original.errors.sources.items() if s.phase is not None}
 
+    commit_point()
     extra = study.drive.study_outputs(RunContext(study, values_rad, outputs, progress))
+    commit_point()
     clash = set(extra.summary) & set(summary)
     if clash:
         raise ValueError(f"{type(study.drive).__name__}.study_outputs: keys {sorted(clash)} are already in summary.json")
     summary.update(extra.summary)
     figures += extra.figures
 
-    with atomic_output_dir(out) as tmp:
-        for f in figures:
-            _draw(f, tmp)
-        arrays = {
-            "te": values,
-            "te_rad": values_rad,
-            "unit": unit,
-            "metric": study.metric.name,
-            "seed": study.seed,
-            "index": np.arange(study.samples),
-        } | dict(extra.arrays)
-        np.savez_compressed(tmp / "samples.npz", **arrays)
-        for name, content in extra.files.items():
-            np.savez_compressed(tmp / name, **content)
-        plots.histogram(values, stats, unit=study.unit, metric=study.metric.label, title=study.title, path=tmp / "histogram.png")
-        plots.trace(
-            tr.theta / (2 * math.pi),
-            te_trace,
-            unit=study.unit,
-            path=tmp / "trace.png",
-            title=f"TE of a typical sample (#{typical}, {study.metric.name} {values[typical]:.1f}{sym if angle else ''}) "
-            f"over {tr.span_revs} input revolutions",
-            marks=[(tr.theta_max / (2 * math.pi), mx, f"max {mx:.1f}{sym}"), (tr.theta_min / (2 * math.pi), mn, f"min {mn:.1f}{sym}")],
-        )
-        summary["timing_s"]["total"] = time.perf_counter() - t_start
-        text = report(study, summary, errs, tr)
-        for o in outcomes:
-            text += "\n".join(o.report(summary))
-        text += "\n".join(extra.report) + ("\n" if extra.report else "")
-        (tmp / "report.md").write_text(text, encoding="utf-8")
-        write_json(tmp / "summary.json", summary)
+    for f in figures:
+        _draw(f, tmp)
+    arrays = {
+        "te": values,
+        "te_rad": values_rad,
+        "unit": unit,
+        "metric": study.metric.name,
+        "seed": study.seed,
+        "index": np.arange(study.samples),
+    } | dict(extra.arrays)
+    np.savez_compressed(tmp / "samples.npz", **arrays)
+    for name, content in extra.files.items():
+        np.savez_compressed(tmp / name, **content)
+    plots.histogram(values, stats, unit=study.unit, metric=study.metric.label, title=study.title, path=tmp / "histogram.png")
+    plots.trace(
+        tr.theta / (2 * math.pi),
+        te_trace,
+        unit=study.unit,
+        path=tmp / "trace.png",
+        title=f"TE of a typical sample (#{typical}, {study.metric.name} {values[typical]:.1f}{sym if angle else ''}) "
+        f"over {tr.span_revs} input revolutions",
+        marks=[(tr.theta_max / (2 * math.pi), mx, f"max {mx:.1f}{sym}"), (tr.theta_min / (2 * math.pi), mn, f"min {mn:.1f}{sym}")],
+    )
+    summary["timing_s"]["total"] = time.perf_counter() - t_start
+    text = report(study, summary, errs, tr)
+    for o in outcomes:
+        text += "\n".join(o.report(summary))
+    text += "\n".join(extra.report) + ("\n" if extra.report else "")
+    (tmp / "report.md").write_text(text, encoding="utf-8")
+    summary["files"] = written_files(tmp, "summary.json")  # what gearte wrote here: a later run replaces only these
+    write_json(tmp / "summary.json", summary)
     return summary
 
 
@@ -289,7 +366,7 @@ def report(study: Study, s: dict, errs: dict, tr) -> str:
         f"- Metric: {study.metric.describe()}.",
         "- TE Δθ = θ_out − θ_in / i (rad inside gearte; reported in " + study.unit + f", 1 rad = {ARCSEC_PER_RAD:.3f}″).",
         f"- Samples: {s['samples']:,}; seed {s['seed']}; {s['assumptions']['random_keys']}. Samples are computed in blocks of "
-        f"{s['block_size']}, {s['chunk_size']} per compiled call; results do not depend on the chunk size.",
+        f"{s['block_size']} (one compiled program), progress shown every {s['chunk_size']}; results do not depend on the chunk size.",
         "- Random phases are uniform on [0, 2π); magnitudes and values follow the laws in the table above.",
         f"- Precision: {s['assumptions']['precision']}.",
         f"- Accuracy: {s['assumptions']['accuracy']}.",

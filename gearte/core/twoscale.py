@@ -2,7 +2,7 @@
 
 `extrema` samples the whole hyper-period at 16 points per period of the *fastest*
 order. When one line is far faster than all the others — a harmonic drive's
-tooth-to-tooth term at 2 z₂ times the input speed next to eccentricity terms at 1,
+tooth-mesh term at z₂ times the input speed (even z₂) next to eccentricity terms at 1,
 2 and 2 z₂/z₁ — that grid is mostly spent on a term whose amplitude is known in
 closed form. Here the signal is split as ``F = S + b sin(k τ + φ)`` with S the slow
 part and b the amplitude of the fast order k, and:

@@ -81,8 +81,14 @@ A pin can also reach the far flank of its tooth space, but only after the disc t
 through the space's width at the pin's radius; gearte, like the paper, pairs each pin
 with its own flank.
 
-**The drive** (`CycloidPin`, a grid drive of the drive protocol): its 20 error sources are
-the fields of `CycloidErrors`, each a signed deviation (µm, or rad for angles; one value
+**Generating grinding** (`process = "generating"`, `gearte.drives.cycloid_pin_grinding`): the wheel is one
+pin moved by the grinder's generating crank and work drive; its errors move the flank along the normal by
+e_n(φ). **The paper's numbering** (K = n − J, `paper_position`, `paper_pin`, `paper_tooth`,
+`errors_from_paper` in `gearte.drives.cycloid_pin_geometry`) and the **disc centre** held at a fixed offset or
+floating (`gearte.drives.cycloid_pin_metrics.floating_disc`) are set out in docs/cycloid.md.
+
+**The drive** (`CycloidPin`, a grid drive of the drive protocol): its 20 error sources (26 for a
+generating-ground disc) are the fields of `CycloidErrors`, each a signed deviation (µm, or rad for angles; one value
 per tooth space or per pin where the field has one), in the order of `ERROR_FIELDS`. Its
 response to a set of errors is the clearance analysis at every angle of its grid
 (`input_angles`: one input revolution or more, `positions_per_pitch` per pin pitch), and
@@ -128,10 +134,14 @@ from .cycloid_pin_contact import (
     theoretical_pairs,
 )
 from .cycloid_pin_geometry import (
+    ALL_ERROR_FIELDS,
     ERROR_FIELDS,
     ERROR_UNITS,
+    GENERATING_ERROR_FIELDS,
+    GENERATING_ONLY,
     PER_PIN,
     PER_SPACE,
+    PROCESSES,
     CycloidErrors,
     CycloidModification,
     _number,
@@ -183,6 +193,19 @@ SOURCE_TEXT = {
     "pin_wheel_offset_phase": ("α_2", "angle of the pin-wheel centre offset"),
     "pin_circle_eccentricity": ("e_p", "pin-circle eccentricity fixed in the housing"),
     "pin_circle_eccentricity_phase": ("α_e", "angle of the pin-circle eccentricity"),
+    "wheel_radius": ("δr_w", "wheel working-radius error (generating grinding)"),
+    "generating_eccentricity": ("δa_g", "generating crank radius error"),
+    "generating_chain": ("A_c", "generating chain's once-per-crank-revolution angular error"),
+    "generating_chain_phase": ("p_c", "phase of the generating chain's error"),
+    "pitch_accumulated": ("A_p", "work drive's once-per-revolution error (accumulated pitch F_p = 2 A_p R_z)"),
+    "pitch_accumulated_phase": ("p_p", "phase of the accumulated pitch error"),
+}
+#: How the meaning of the wheel's errors changes for a generating-ground disc.
+GENERATING_SOURCE_TEXT = {
+    "dressing_x": ("δX", "wheel centre offset across the wheel slide (generating grinding)"),
+    "dressing_y": ("δR", "wheel centre offset along the wheel slide (generating grinding)"),
+    "infeed": ("δR(n)", "wheel-slide position error while each tooth space is ground"),
+    "indexing": ("Δβ(n)", "single pitch (indexing) error of each tooth space"),
 }
 
 
@@ -260,6 +283,8 @@ class CycloidPin(AbstractGridDrive):
     - `reference`: one reducer's errors to analyse in detail in study reports (a `CycloidErrors`
       or a mapping of its fields; default none), e.g. the reducer of Yao & Liang's figures 3–8.
     - `reference_record`: how a study file gave `reference` (JSON text, for summaries).
+    - `process`: how the disc is ground: ``"form"`` (Yao & Liang's form grinding, the default) or
+      ``"generating"`` (`gearte.drives.cycloid_pin_grinding`): it decides the error sources.
 
     Raises `ValueError`, naming the field, for tooth counts that do not mesh, K_1 ≥ 1,
     non-positive radii, overlapping pins, and undercut (looped) profiles.
@@ -274,6 +299,7 @@ class CycloidPin(AbstractGridDrive):
     analysis: CycloidAnalysis
     reference: CycloidErrors
     reference_record: str = eqx.field(static=True)
+    process: str = eqx.field(static=True)
 
     type_name: ClassVar[str] = "cycloid_pin"
     linear: ClassVar[bool] = False
@@ -294,7 +320,11 @@ class CycloidPin(AbstractGridDrive):
         analysis: CycloidAnalysis | None = None,
         reference: CycloidErrors | Mapping[str, Any] | None = None,
         reference_record: str | None = None,
+        process: str = "form",
     ):
+        if process not in PROCESSES:
+            raise ValueError(f"process: the disc is ground by {' or '.join(map(repr, PROCESSES))}, got {process!r}")
+        self.process = process
         zb = as_int("z_pins", z_pins, minimum=4)
         za = zb - 1
         if z_lobes is not None:
@@ -391,6 +421,7 @@ class CycloidPin(AbstractGridDrive):
     def describe(self) -> list[tuple[str, str]]:
         m = self.modification
         return [
+            ("disc ground by", "generating grinding" if self.process == "generating" else "form grinding"),
             ("pins z_b", str(self.z_pins)),
             ("lobes z_a", str(self.z_lobes)),
             ("pin-circle radius R_z", f"{float(self.pin_circle_radius):g} mm"),
@@ -407,11 +438,14 @@ class CycloidPin(AbstractGridDrive):
 
     @property
     def error_sources(self) -> dict[str, SourceSpec]:
-        """The 20 fields of `CycloidErrors`, each a signed deviation, in the order of `ERROR_FIELDS`."""
+        """The fields of `CycloidErrors` of the disc's process, each a signed deviation: for form grinding the 20 of
+        `ERROR_FIELDS`, for generating grinding the 26 of `GENERATING_ERROR_FIELDS`, in that order."""
         out = {}
-        for name in ERROR_FIELDS:
+        for name in self.error_fields:
             shape = (self.z_lobes,) if name in PER_SPACE else (self.z_pins,) if name in PER_PIN else ()
-            symbol, text = SOURCE_TEXT[name]
+            symbol, text = (
+                GENERATING_SOURCE_TEXT[name] if self.process == "generating" and name in GENERATING_SOURCE_TEXT else SOURCE_TEXT[name]
+            )
             out[name] = SourceSpec(name, "deviation", shape=shape, unit=ERROR_UNITS[name], symbol=symbol, description=text)
         return out
 
@@ -499,15 +533,24 @@ class CycloidPin(AbstractGridDrive):
     def errors_dict(self, errors: CycloidErrors | Mapping[str, Any] | None) -> dict[str, Array]:
         """`errors` as the protocol's mapping source name → value (every field, broadcast to its shape)."""
         err = checked_errors(self, errors)
-        return {name: getattr(err, name) for name in ERROR_FIELDS}
+        return {name: getattr(err, name) for name in self.error_fields}
+
+    @property
+    def error_fields(self) -> tuple[str, ...]:
+        """The error fields of this disc's process (`ERROR_FIELDS` or `GENERATING_ERROR_FIELDS`)."""
+        return PROCESSES[self.process]
 
 
 # The public API of the cycloid-pin modules, in one place (``gearte.drives.cycloid_pin.clearances`` etc.).
 __all__ = (
+    "ALL_ERROR_FIELDS",
     "ERROR_FIELDS",
     "ERROR_UNITS",
+    "GENERATING_ERROR_FIELDS",
+    "GENERATING_ONLY",
     "PER_PIN",
     "PER_SPACE",
+    "PROCESSES",
     "SOURCE_TEXT",
     "Clearances",
     "CycloidAnalysis",

@@ -22,6 +22,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..core.units import MM_PER_UM, TWO_PI
 from ..core.validate import as_float
+from .cycloid_pin_grinding import GeneratingDeviation, generating_deviation, normal_deviation, rigid_pitch_error
 
 if TYPE_CHECKING:
     from .cycloid_pin import CycloidPin
@@ -150,6 +151,19 @@ class CycloidErrors(eqx.Module):
       from the input axis, fixed in the converted mechanism (the paper's eq. 3).
     - `pin_circle_eccentricity`, `pin_circle_eccentricity_phase`: (µm) at α_e (rad), a
       pin-circle eccentricity fixed in the housing: at α_e + θ_T in the converted frame.
+
+    **Generating grinding only** (`gearte.drives.cycloid_pin_grinding`; a form-ground disc ignores
+    them, and refuses them by name in a mapping). With ``process = "generating"`` the wheel is one pin of radius r_Z, and
+    `dressing_x`, `dressing_y` and `infeed` are the wheel's centre offsets in the wheel-head frame
+    (across; along the wheel slide, per space), no longer rigid shifts of a form wheel's profile.
+
+    - `wheel_radius`: δr_w, error of the wheel's working radius r_Z (dressing), µm (positive: more cut).
+    - `generating_eccentricity`: δa_g, error of the generating crank radius a, µm.
+    - `generating_chain`, `generating_chain_phase`: A_c (rad) at p_c (rad), the generating chain's
+      once-per-crank-revolution angular error ε_c(φ) = A_c sin(φ + p_c) (one crank revolution per space).
+    - `pitch_accumulated`, `pitch_accumulated_phase`: A_p (rad) at p_p (rad), the work drive's
+      once-per-revolution angular error A_p sin((2πn + φ)/z_a + p_p): the accumulated pitch error
+      (F_p = 2 A_p R_z on the pin circle), the per-space part also within each space.
     """
 
     dressing_x: Float[Array, ""]
@@ -172,6 +186,12 @@ class CycloidErrors(eqx.Module):
     pin_wheel_offset_phase: Float[Array, ""]
     pin_circle_eccentricity: Float[Array, ""]
     pin_circle_eccentricity_phase: Float[Array, ""]
+    wheel_radius: Float[Array, ""]
+    generating_eccentricity: Float[Array, ""]
+    generating_chain: Float[Array, ""]
+    generating_chain_phase: Float[Array, ""]
+    pitch_accumulated: Float[Array, ""]
+    pitch_accumulated_phase: Float[Array, ""]
 
     def __init__(
         self,
@@ -196,6 +216,12 @@ class CycloidErrors(eqx.Module):
         pin_wheel_offset_phase: ArrayLike = 0.0,
         pin_circle_eccentricity: ArrayLike = 0.0,
         pin_circle_eccentricity_phase: ArrayLike = 0.0,
+        wheel_radius: ArrayLike = 0.0,
+        generating_eccentricity: ArrayLike = 0.0,
+        generating_chain: ArrayLike = 0.0,
+        generating_chain_phase: ArrayLike = 0.0,
+        pitch_accumulated: ArrayLike = 0.0,
+        pitch_accumulated_phase: ArrayLike = 0.0,
     ):
         f = lambda x: jnp.asarray(x, dtype=float)
         self.dressing_x, self.dressing_y, self.infeed = f(dressing_x), f(dressing_y), f(infeed)
@@ -208,14 +234,34 @@ class CycloidErrors(eqx.Module):
         self.pin_wheel_offset, self.pin_wheel_offset_phase = f(pin_wheel_offset), f(pin_wheel_offset_phase)
         self.pin_circle_eccentricity = f(pin_circle_eccentricity)
         self.pin_circle_eccentricity_phase = f(pin_circle_eccentricity_phase)
+        self.wheel_radius, self.generating_eccentricity = f(wheel_radius), f(generating_eccentricity)
+        self.generating_chain, self.generating_chain_phase = f(generating_chain), f(generating_chain_phase)
+        self.pitch_accumulated, self.pitch_accumulated_phase = f(pitch_accumulated), f(pitch_accumulated_phase)
 
 
 #: Fields of `CycloidErrors` with one value per tooth space / per pin.
 PER_SPACE = ("infeed", "indexing")
 PER_PIN = ("pin_tangential", "pin_radial")
-ERROR_FIELDS = tuple(f.name for f in dataclasses.fields(CycloidErrors))
+ALL_ERROR_FIELDS = tuple(f.name for f in dataclasses.fields(CycloidErrors))
+#: The fields only a generating-ground disc has (the machine's generating kinematics).
+GENERATING_ONLY = (
+    "wheel_radius",
+    "generating_eccentricity",
+    "generating_chain",
+    "generating_chain_phase",
+    "pitch_accumulated",
+    "pitch_accumulated_phase",
+)
+#: The error fields of a form-ground disc's reducer (the error sources of ``process = "form"``), in order.
+ERROR_FIELDS = tuple(f for f in ALL_ERROR_FIELDS if f not in GENERATING_ONLY)
+#: The error fields of a generating-ground disc's reducer: those of form grinding, then `GENERATING_ONLY`.
+GENERATING_ERROR_FIELDS = ERROR_FIELDS + GENERATING_ONLY
+#: The grinding processes, and the error fields of each.
+PROCESSES = {"form": ERROR_FIELDS, "generating": GENERATING_ERROR_FIELDS}
+#: Fields that are angles (rad): the index and generating-chain angles and every phase.
+ANGLE_FIELDS = ("index_offset", "indexing", "generating_chain", "pitch_accumulated")
 #: Unit of each error field, for reports.
-ERROR_UNITS = {name: ("rad" if name in ("index_offset", "indexing") or name.endswith("_phase") else "µm") for name in ERROR_FIELDS}
+ERROR_UNITS = {name: ("rad" if name in ANGLE_FIELDS or name.endswith("_phase") else "µm") for name in ALL_ERROR_FIELDS}
 
 
 def as_cycloid_errors(errors: CycloidErrors | Mapping[str, Any] | None) -> CycloidErrors:
@@ -228,9 +274,9 @@ def as_cycloid_errors(errors: CycloidErrors | Mapping[str, Any] | None) -> Cyclo
     if isinstance(errors, CycloidErrors):
         return errors
     if isinstance(errors, Mapping):
-        unknown = sorted(set(errors) - set(ERROR_FIELDS))
+        unknown = sorted(set(errors) - set(ALL_ERROR_FIELDS))
         if unknown:
-            raise ValueError(f"errors: unknown error field(s) {unknown}; the fields are {list(ERROR_FIELDS)}")
+            raise ValueError(f"errors: unknown error field(s) {unknown}; the fields are {list(ALL_ERROR_FIELDS)}")
         return CycloidErrors(**dict(errors))
     raise ValueError(f"errors: expected a CycloidErrors or a mapping of error fields, got {type(errors).__name__}")
 
@@ -240,9 +286,16 @@ def checked_errors(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] 
 
     `errors`: a `CycloidErrors`, a mapping of field names to values (the others 0), or None (no error).
     """
+    if isinstance(errors, Mapping) and getattr(drive, "process", "form") == "form":
+        wrong = sorted(set(errors) & set(GENERATING_ONLY))
+        if wrong:
+            raise ValueError(
+                f"errors: {wrong} are errors of a generating-ground disc; this disc is form-ground "
+                '(give the drive process = "generating", or leave them out)'
+            )
     errors = as_cycloid_errors(errors)
     out = {}
-    for name in ERROR_FIELDS:
+    for name in ALL_ERROR_FIELDS:
         v = jnp.asarray(getattr(errors, name))
         if name in PER_SPACE or name in PER_PIN:
             n = drive.z_lobes if name in PER_SPACE else drive.z_pins
@@ -288,7 +341,8 @@ def theoretical_profile(drive: CycloidPin, phi: ArrayLike, *, wheel: bool = Fals
 
 class _Placement(eqx.Module):
     """Rigid placement of one tooth-space half in the disc frame: the rotation modification, the wheel
-    offsets (δX_4, δY_4 + ΔY_4(n)), the index rotation −β_n and the bore eccentricity (Yao & Liang 2001, eqs. 1–2)."""
+    offsets (δX_4, δY_4 + ΔY_4(n)), the index rotation −β_n and the bore eccentricity (Yao & Liang 2001, eqs. 1–2);
+    for a generating-ground disc also the machine's errors along the flank (`gearte.drives.cycloid_pin_grinding`)."""
 
     cos_mod: Array
     sin_mod: Array
@@ -298,6 +352,7 @@ class _Placement(eqx.Module):
     sin_beta: Array
     ex: Array
     ey: Array
+    generating: GeneratingDeviation | None
 
 
 def _placement(drive: CycloidPin, err: CycloidErrors, n, side) -> _Placement:
@@ -305,21 +360,33 @@ def _placement(drive: CycloidPin, err: CycloidErrors, n, side) -> _Placement:
     beta = jnp.asarray(n).astype(float) * (TWO_PI / drive.z_lobes) + err.index_offset + err.indexing[n]
     ex = err.setup_eccentricity * jnp.cos(err.setup_phase) + err.mandrel_runout * jnp.cos(err.mandrel_phase)
     ey = err.setup_eccentricity * jnp.sin(err.setup_phase) + err.mandrel_runout * jnp.sin(err.mandrel_phase)
+    if drive.process == "generating":
+        # The wheel's offsets act along the flank (normal_deviation), the work drive's error at the space centre rigidly.
+        beta = beta + rigid_pitch_error(err, n)
+        dx = dy = jnp.zeros_like(beta)
+        gen = generating_deviation(err, n)
+    else:
+        dx, dy, gen = err.dressing_x * UM, (err.dressing_y + err.infeed[n]) * UM, None
     return _Placement(
         jnp.cos(side * m.rotation),
         -jnp.sin(side * m.rotation),
-        err.dressing_x * UM,
-        (err.dressing_y + err.infeed[n]) * UM,
+        dx,
+        dy,
         jnp.cos(beta),
         -jnp.sin(beta),
         ex * UM,
         ey * UM,
+        gen,
     )
 
 
 def _placed_curve(drive: CycloidPin, pl: _Placement, phi, d):
     """Tooth-space half placed by `pl`: the wheel's P_Z − d N_Z in the disc frame centred on the bore, mm.
-    d = r_Z: the flank; d = r_Z − r′: the pin-centre locus."""
+    d = r_Z: the flank; d = r_Z − r′: the pin-centre locus. A generating-ground flank has d − e_n(φ)."""
+    if pl.generating is not None:
+        d = d - normal_deviation(
+            pl.generating, phi, wheel_pin_circle_radius=drive.wheel_pin_circle_radius, eccentricity=drive.eccentricity, z_pins=drive.z_pins
+        )
     x, y = _wheel_curve(drive.wheel_pin_circle_radius, drive.eccentricity, drive.z_lobes, drive.z_pins, phi, d)
     x, y = pl.cos_mod * x - pl.sin_mod * y, pl.sin_mod * x + pl.cos_mod * y
     x, y = x + pl.dx, y + pl.dy
@@ -353,3 +420,77 @@ def disc_outline(
     phi = jnp.linspace(-math.pi, math.pi, points_per_space)
     pts = [tooth_profile(drive, phi, errors=errors, space=n) for n in range(drive.z_lobes)]
     return jnp.concatenate(pts, axis=0)
+
+
+# ---------------------------------------------------------------- Yao & Liang's numbering
+
+#: Yao & Liang (2001) compute their figures 3–8 with J = 6 (tooth space 1 of the disc, and pin 1, six
+#: teeth to the right of the static axis at θ_T = 0).
+YAO_LIANG_J = 6
+
+
+def paper_position(drive: CycloidPin, pin: ArrayLike, input_angle: ArrayLike) -> np.ndarray:
+    """K: the paper's number of the position of gearte's pin `pin` (0-based) at gearte's input angle θ_T (rad).
+
+    Yao & Liang (2001, sec. 2) count positions counter-clockwise from the static axis (gearte's +y, the
+    crank): at their input angle θ_T′ ∈ [0, 2π/z_b) the pin of position K is at (K − 1) 2π/z_b − θ_T′
+    from it. Their θ_T′ turns the pin wheel clockwise, gearte's θ_T counter-clockwise, so the two
+    describe the same configuration when θ_T′ = −θ_T (mod a pitch); gearte's pin j is at
+    ψ_j = θ_T + 2πj/z_b, so K = 1 + round((ψ_j + θ_T′)·z_b/2π) (mod z_b, in 1 … z_b). Over the paper's
+    sweep θ_T′ ∈ [0, 2π/z_b), gearte's θ_T ∈ (−2π/z_b, 0], K is gearte's pin number j + 1; over
+    gearte's default sweep θ_T ∈ (0, 2π/z_b), K = j + 2.
+    """
+    zb = drive.z_pins
+    p = TWO_PI / zb
+    th = np.asarray(input_angle, dtype=float)
+    tp = np.mod(-th, p)
+    tp = np.where(tp > p * (1 - 1e-9), 0.0, tp)
+    psi = th + np.asarray(pin) * p
+    return (np.rint((psi + tp) / p).astype(int) % zb) + 1
+
+
+def paper_pin(drive: CycloidPin, pin: ArrayLike, *, J: int = YAO_LIANG_J) -> np.ndarray:
+    """The paper's number n (1 … z_b) of gearte's pin `pin` (0-based): n = K + J at θ_T = 0, so n = j + 1 + J."""
+    return (np.asarray(pin) + J) % drive.z_pins + 1
+
+
+def paper_tooth(drive: CycloidPin, space: ArrayLike, *, J: int = YAO_LIANG_J) -> np.ndarray:
+    """The paper's number n (1 … z_a) of gearte's tooth space `space` (0-based).
+
+    The paper numbers the disc's tooth spaces counter-clockwise from its tooth 1 (its frame X′_2 O Y′_2,
+    which is turned 2πJ/z_a clockwise from the static axis at θ_T = 0); gearte numbers them clockwise
+    from space 0, which is on the static axis at θ_T = 0. So space s is the paper's tooth J + 1 − s (mod z_a).
+    """
+    return (J - np.asarray(space)) % drive.z_lobes + 1
+
+
+def errors_from_paper(drive: CycloidPin, *, J: int = YAO_LIANG_J, **fields: Any) -> dict[str, Any]:
+    """Error fields given in Yao & Liang's numbering and frames, in gearte's (µm, rad; a mapping for `CycloidErrors`).
+
+    - per-space fields (`infeed`, `indexing`): value n − 1 is the paper's tooth n; gearte's space s gets tooth
+      J + 1 − s; the paper turns tooth n counter-clockwise by β(n), gearte turns space s clockwise, so
+      `indexing` and `index_offset` change sign;
+    - per-pin fields: value n − 1 is the paper's pin n, gearte's pin j = n − 1 − J;
+    - angles in the disc frame (`setup_phase`, `mandrel_phase`): the paper's frame X′_2 O Y′_2 is gearte's
+      disc frame turned 2πJ/z_a clockwise, so its angle α is gearte's α − 2πJ/z_a;
+    - everything else (lengths; the static-frame angles α_1, α_2) is the same. The generating machine's
+      errors are gearte's own (the paper has none): give them in gearte's convention.
+    """
+    za, zb = drive.z_lobes, drive.z_pins
+    out = {}
+    for name, v in fields.items():
+        if name not in ALL_ERROR_FIELDS:
+            raise ValueError(f"{name}: not an error field; the fields are {list(ALL_ERROR_FIELDS)}")
+        v = np.asarray(v, dtype=float)
+        if name in PER_SPACE and v.ndim:
+            v = v[(J - np.arange(za)) % za]  # gearte space s ← paper tooth J + 1 − s (index J − s)
+        if name in PER_PIN and v.ndim:
+            v = v[(np.arange(zb) + J) % zb]  # gearte pin j ← paper pin j + 1 + J (index j + J)
+        if name in ("indexing", "index_offset"):
+            v = -v
+        if name in GENERATING_ONLY:
+            raise ValueError(f"{name}: the paper has no generating-machine errors; give them in gearte's convention")
+        if name in ("setup_phase", "mandrel_phase"):
+            v = v - TWO_PI * J / za
+        out[name] = v if v.ndim else float(v)
+    return out

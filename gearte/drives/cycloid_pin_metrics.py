@@ -22,17 +22,19 @@ respect to its errors and to the profile modification.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ..core.metrics import AbstractMetric, Quantity
 from ..core.precision import require_x64
-from .cycloid_pin_contact import Clearances, _analyse, loaded_pairs, smooth_loaded_pairs
+from .cycloid_pin_contact import Clearances, _analyse, _clearances_jit, _sweep_jit, loaded_pairs, smooth_loaded_pairs
 from .cycloid_pin_geometry import CycloidErrors, CycloidModification, checked_errors
 
 if TYPE_CHECKING:
@@ -293,8 +295,136 @@ __all__ = (
     "LostMotionMin",
     "RotationErrorPeakToPeak",
     "Sensitivity",
+    "floating_disc",
+    "floating_loaded_pairs",
     "grid_metrics",
     "grid_metrics_jit",
     "sensitivities",
     "unit_metrics",
 )
+
+
+# ---------------------------------------------------------------- the disc centre: fixed or floating
+
+
+def _offset(x: float, y: float) -> tuple[Array, Array]:
+    return jnp.asarray(math.hypot(x, y), dtype=float), jnp.asarray(math.atan2(y, x), dtype=float)
+
+
+def floating_disc(
+    drive: CycloidPin,
+    errors: CycloidErrors | Mapping[str, Any] | None = None,
+    *,
+    radius_um: float | None = None,
+    positions: ArrayLike | None = None,
+    rings: int = 4,
+    directions: int = 16,
+) -> dict[str, Any]:
+    """Does the disc interfere because its centre is held at a fixed offset, or would it also interfere if it floated?
+
+    Yao & Liang (2001) hold the disc centre at a fixed offset Δ_1 at α_1 from the eccentric (the turning-arm
+    bearing's clearance) and the pin-wheel centre at Δ_2 at α_2 (the input-shaft bearings, the spigot fits).
+    The radial clearance of the disc, g = (R′ − R_Z) + (r_Z − r′) (µm; the gap at a tooth-space bottom and at a
+    tooth tip with the nominal centre distance), is shared between the two ends of the crank: a centre
+    distance grown by c leaves g − c at the bottom of the spaces next to the crank and g + c at the tips
+    opposite; the disc's own profile eccentricity (ΔA at φ plus ΔB, turning with the disc) takes up to its
+    length from either. A rigid disc whose offset along the crank exceeds what is left interferes; a real
+    disc floats within its bearing clearance and settles where the pins let it.
+
+    **Arguments:**
+
+    - `drive`, `errors`: the stage and the reducer's errors.
+    - `radius_um`: how far the disc centre can float from the eccentric, µm (default: the given Δ_1).
+    - `positions`: input angles, rad (default the drive's grid).
+    - `rings`, `directions`: the search over centre offsets within `radius_um` (rings × directions + the centre).
+
+    **Returns:** a dict (µm, rad): ``along_crank`` (c: ΔA′ + Δ_1 sin α_1 − Δ_2 sin α_2), ``across_crank``,
+    ``disc_offset_along``, ``pin_wheel_offset_along``, ``eccentricity_error``, ``radial_clearance`` (g),
+    ``root_gap`` (g − c), ``tip_gap`` (g + c), ``profile_eccentricity`` (|ΔA e^{iφ} + ΔB e^{iφ_B}|),
+    ``lost_motion_min_rigid`` (min over the positions, the given offsets), ``lost_motion_min_centred`` (Δ_1 = 0),
+    ``lost_motion_min_floating`` (min over positions of the max over centre offsets within `radius_um`),
+    ``best_offset`` (the single fixed offset (µm, rad) with the largest minimum, and that minimum),
+    ``interfering_rigid`` / ``interfering_floating`` (fractions of the positions), ``float_radius``.
+    """
+    require_x64()
+    err = checked_errors(drive, errors)
+    p = _positions(drive, positions)
+    f = lambda x: float(jnp.asarray(x))
+    rho = f(err.disc_offset) if radius_um is None else float(radius_um)
+    d1, a1, d2, a2 = f(err.disc_offset), f(err.disc_offset_phase), f(err.pin_wheel_offset), f(err.pin_wheel_offset_phase)
+    along = f(err.eccentricity) + d1 * math.sin(a1) - d2 * math.sin(a2)
+    across = d1 * math.cos(a1) - d2 * math.cos(a2)
+    g = (f(err.pin_circle_radius) - f(drive.modification.shift) * 1e3) + (f(drive.modification.equidistant) * 1e3 - f(err.pin_radius))
+    pe = abs(
+        f(err.setup_eccentricity) * complex(math.cos(f(err.setup_phase)), math.sin(f(err.setup_phase)))
+        + f(err.mandrel_runout) * complex(math.cos(f(err.mandrel_phase)), math.sin(f(err.mandrel_phase)))
+    )
+    r = np.concatenate([[0.0], np.repeat(np.arange(1, rings + 1) / rings * rho, directions)])
+    t = np.concatenate([[0.0], np.tile(np.arange(directions) * (2 * math.pi / directions), rings)])
+    dx, dy = r * np.cos(t), r * np.sin(t)
+    # One compiled sweep (the drive's response), called per offset: new error values do not recompile.
+    lm = np.stack(
+        [
+            np.asarray(
+                _sweep_jit(drive, eqx.tree_at(lambda e: (e.disc_offset, e.disc_offset_phase), err, _offset(x, y)), p, False).lost_motion
+            )
+            for x, y in zip(dx, dy, strict=True)
+        ]
+    )
+    rigid = np.asarray(_sweep_jit(drive, err, p, False).lost_motion)
+    floating = lm.max(axis=0)
+    worst = lm.min(axis=1)
+    k = int(np.argmax(worst))
+    return {
+        "along_crank": along,
+        "across_crank": across,
+        "disc_offset_along": d1 * math.sin(a1),
+        "pin_wheel_offset_along": -d2 * math.sin(a2),
+        "eccentricity_error": f(err.eccentricity),
+        "radial_clearance": g,
+        "root_gap": g - along,
+        "tip_gap": g + along,
+        "profile_eccentricity": pe,
+        "lost_motion_min_rigid": float(rigid.min()),
+        "lost_motion_min_centred": float(lm[0].min()),
+        "lost_motion_min_floating": float(floating.min()),
+        "best_offset": {"offset": float(r[k]), "phase": float(t[k]), "lost_motion_min": float(worst[k])},
+        "interfering_rigid": float(np.mean(rigid < 0)),
+        "interfering_floating": float(np.mean(floating < 0)),
+        "float_radius": rho,
+    }
+
+
+def floating_loaded_pairs(
+    drive: CycloidPin,
+    errors: CycloidErrors | Mapping[str, Any] | None,
+    input_angle: float,
+    *,
+    radius_um: float | None = None,
+    rings: int = 2,
+    directions: int = 12,
+) -> dict[str, Any]:
+    """Loaded pairs at one input angle for the disc centre anywhere within `radius_um` of the eccentric where the disc
+    does not interfere (lost motion ≥ 0): where a floating disc can settle (see `floating_disc`).
+
+    **Returns:** ``{"min", "max"}`` of the loaded-pair count over those centre positions (None if there is none),
+    ``"positions"`` (how many of the `rings` × `directions` + 1 searched), ``"float_radius"`` (µm).
+    """
+    require_x64()
+    err = checked_errors(drive, errors)
+    rho = float(err.disc_offset) if radius_um is None else float(radius_um)
+    th = jnp.asarray(input_angle, dtype=float)
+    counts = []
+    for k in range(rings * directions + 1):
+        r = 0.0 if k == 0 else rho * ((k - 1) // directions + 1) / rings
+        t = 0.0 if k == 0 else ((k - 1) % directions) * 2 * math.pi / directions
+        e = eqx.tree_at(lambda e: (e.disc_offset, e.disc_offset_phase), err, _offset(r * math.cos(t), r * math.sin(t)))
+        c = _clearances_jit(drive, e, th, True)  # the report's analysis at its input angle: compiled once
+        if float(c.lost_motion) >= 0:
+            counts.append(int(loaded_pairs(c, budget_mm=drive.analysis.budget_mm)))
+    return {
+        "min": min(counts) if counts else None,
+        "max": max(counts) if counts else None,
+        "positions": len(counts),
+        "float_radius": rho,
+    }

@@ -10,7 +10,8 @@
   grid, interference, and every pin's clearances at the input position.
 
 Everything is returned as `StudyOutputs` (summary entries, report lines, figures drawn by
-`gearte.cli.plots`, arrays); nothing here imports the studies or the command line.
+`gearte.cli.plots`, arrays); the report's text is `gearte.drives.cycloid_pin_report`. Nothing here imports
+the studies or the command line.
 """
 
 from __future__ import annotations
@@ -28,8 +29,9 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD
 from .cycloid_pin_contact import _analyse, clearances, loaded_pairs, pitch_angles, revolution_angles, sweep, theoretical_pairs
-from .cycloid_pin_geometry import ERROR_FIELDS, checked_errors
-from .cycloid_pin_metrics import LoadedPairs, LostMotion, RotationErrorPeakToPeak, sensitivities
+from .cycloid_pin_geometry import YAO_LIANG_J, checked_errors, paper_pin, paper_position, paper_tooth
+from .cycloid_pin_metrics import LoadedPairs, LostMotion, RotationErrorPeakToPeak, floating_disc, floating_loaded_pairs, sensitivities
+from .cycloid_pin_report import report
 from .cycloid_pin_table import TO_INTERNAL, unit_of
 from .protocol import AbstractStudyContext, Figure, StudyOutputs
 
@@ -63,16 +65,19 @@ ASSUMPTIONS = {
     "for reverse pins), as an angle of the output and × R′ on the pin circle",
     "normal_clearance": "min over the pin's flank of |pin centre − flank point| − r′, at that contacting configuration",
     "loaded_pairs": "driving-flank pins whose tangential clearance on the pin circle ≤ the deformation budget",
+    "paper_numbering": "K (Yao & Liang 2001, sec. 2): the position counted counter-clockwise from the static axis (the "
+    "crank), K = n − J; their input angle turns the pin wheel clockwise, gearte's counter-clockwise, so gearte's θ_T is "
+    "their −θ_T: over their sweep (gearte θ_T ∈ (−pitch, 0]) K is gearte's pin number, at gearte θ_T ∈ (0, pitch) it is "
+    "the pin number + 1; n: their pin and tooth numbers with J = 6 (gearte pin j is their pin j + 1 + J, gearte tooth "
+    "space s their tooth J + 1 − s, mod z)",
+    "disc_centre": "the disc centre is held at the given offset from the eccentric (rigid, as in Yao & Liang 2001); "
+    "`disc_centre` also reports the disc free to float within a circle of that radius",
 }
 
 
 def _num(x) -> float | None:
     x = float(x)
     return x if math.isfinite(x) else None
-
-
-def _fmt(x, spec=".3f") -> str:
-    return "—" if x is None else format(x, spec)
 
 
 def input_angle(drive: CycloidPin) -> float:
@@ -162,6 +167,32 @@ def sample_outputs(drive: CycloidPin, model) -> SampleOutputs:
 # ---------------------------------------------------------------- the reference reducer
 
 
+def _pair(drive: CycloidPin, pin: int, space: int, theta: float, flank: str) -> dict:
+    """A contacting pair in gearte's numbering and in Yao & Liang's (K, and n with their J = 6)."""
+    return {
+        "pin": pin + 1,
+        "tooth_space": space + 1,
+        "flank": flank,
+        "K": int(paper_position(drive, pin, theta)),
+        "paper_pin": int(paper_pin(drive, pin)),
+        "paper_tooth": int(paper_tooth(drive, space)),
+    }
+
+
+def paper_pitch_contacts(drive: CycloidPin, errors, points: int) -> list[dict]:
+    """The contacting pairs (forward load) over Yao & Liang's sweep of one pitch, θ_T′ ∈ [0, 2π/z_b) (gearte's
+    θ_T = −θ_T′), with the share of the pitch each holds: K (= gearte pin number there), pin, tooth space."""
+    th = -np.arange(points) * (drive.pitch / points)
+    res = sweep(drive, errors, th)  # the shape of the report's pitch sweep: compiled once
+    pins, spaces = np.asarray(res.contact_pin), np.asarray(res.space)
+    out = []
+    for j in sorted(set(pins.tolist())):
+        where = np.flatnonzero(pins == j)
+        pair = _pair(drive, j, int(spaces[where[0], j]), float(th[where[0]]), "driving")
+        out.append(pair | {"share_of_pitch": float(where.size / points)})
+    return out
+
+
 def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
     """Summary entries of the reference reducer, and the arrays behind its plots."""
     d, err, a = drive, drive.reference, drive.analysis
@@ -171,6 +202,7 @@ def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
     rev_angles = revolution_angles(d, a.sweep_points_per_pitch, revolutions=a.sweep_revolutions)
     rev = sweep(d, err, rev_angles, normal=False)
     conv = bool(np.all(np.asarray(at.converged)) and np.all(np.asarray(pitch.converged)) and np.all(np.asarray(rev.converged)))
+    centre = floating_disc(d, err, positions=rev_angles, rings=2, directions=12)
 
     arc = np.asarray(at.tangential_arc)
     tang = np.asarray(at.tangential_clearance)
@@ -206,8 +238,11 @@ def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
         "input_angle_deg": math.degrees(theta0),
         "deformation_budget_mm": budget,
         "pairs": pairs,
-        "contact_pair": {"pin": ci + 1, "tooth_space": int(space[ci]) + 1, "flank": "driving"},
-        "reverse_contact_pair": {"pin": ri + 1, "tooth_space": int(space[ri]) + 1, "flank": "reverse"},
+        "process": d.process,
+        "contact_pair": _pair(d, ci, int(space[ci]), theta0, "driving"),
+        "reverse_contact_pair": _pair(d, ri, int(space[ri]), theta0, "reverse"),
+        "paper_J": YAO_LIANG_J,
+        "contact_pairs_over_paper_pitch": paper_pitch_contacts(d, err, a.pitch_points),
         "loaded_pairs": n_loaded,
         "loaded_pairs_out_of": theoretical_pairs(d),
         "loaded_pairs_over_pitch": {"min": int(pitch_loaded.min()), "max": int(pitch_loaded.max()), "mean": float(pitch_loaded.mean())},
@@ -216,6 +251,7 @@ def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
         "lost_motion_range_arcmin": [float(lm.min()), float(lm.max())],
         "lost_motion_at_input_angle_arcmin": float(at.lost_motion) * ARCMIN_PER_RAD,
         "interference": bool(lm.min() < 0),
+        "disc_centre": _disc_centre(centre) | {"loaded_pairs_floating": floating_loaded_pairs(d, err, theta0)},
         "rotation_error_p2p_arcsec": float(te_f.max() - te_f.min()),
         "rotation_error_reverse_p2p_arcsec": float(te_r.max() - te_r.min()),
         "rotation_error_at_input_angle_arcsec": float(at.rotation_error) * ARCSEC_PER_RAD,
@@ -246,6 +282,58 @@ def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
     return summary, curves
 
 
+def _disc_centre(c: dict) -> dict:
+    """`floating_disc`'s result for the summary (µm, ′) with a sentence saying what happens."""
+    am = ARCMIN_PER_RAD
+    out = {
+        "offset_along_crank_um": c["along_crank"],
+        "offset_across_crank_um": c["across_crank"],
+        "disc_offset_along_crank_um": c["disc_offset_along"],
+        "pin_wheel_offset_along_crank_um": c["pin_wheel_offset_along"],
+        "eccentricity_error_um": c["eccentricity_error"],
+        "radial_clearance_um": c["radial_clearance"],
+        "gap_at_space_bottom_um": c["root_gap"],
+        "gap_at_tooth_tip_um": c["tip_gap"],
+        "profile_eccentricity_um": c["profile_eccentricity"],
+        "float_radius_um": c["float_radius"],
+        "lost_motion_min_rigid_arcmin": c["lost_motion_min_rigid"] * am,
+        "lost_motion_min_centred_arcmin": c["lost_motion_min_centred"] * am,
+        "lost_motion_min_floating_arcmin": c["lost_motion_min_floating"] * am,
+        "interfering_share_rigid": c["interfering_rigid"],
+        "interfering_share_floating": c["interfering_floating"],
+        "best_fixed_offset": {
+            "offset_um": c["best_offset"]["offset"],
+            "phase_deg": math.degrees(c["best_offset"]["phase"]),
+            "lost_motion_min_arcmin": c["best_offset"]["lost_motion_min"] * am,
+        },
+    }
+    g, cc, pe = c["radial_clearance"], c["along_crank"], c["profile_eccentricity"]
+    head = (
+        f"radial clearance g = (R′ − R_Z) + (r_Z − r′) = {g:.1f} µm; the fixed offsets move the disc {cc:+.1f} µm along the crank "
+        f"(ΔA′ {c['eccentricity_error']:+.1f}, Δ_1 {c['disc_offset_along']:+.1f}, Δ_2 {c['pin_wheel_offset_along']:+.1f} µm), "
+        f"leaving {g - cc:.1f} µm at the space bottoms next to the crank and {g + cc:.1f} µm at the tips opposite, "
+        f"of which the disc's own profile eccentricity takes up to {pe:.1f} µm"
+    )
+    if c["interfering_rigid"] > 0 and c["interfering_floating"] == 0:
+        tail = (
+            f"; the rigid disc held there interferes over {100 * c['interfering_rigid']:.0f} % of the revolution "
+            f"(lost motion down to {c['lost_motion_min_rigid'] * am:.2f}′): the fixed-offset idealisation interferes. "
+            f"A disc free to float within {c['float_radius']:.1f} µm of the eccentric (its bearing clearance) finds a "
+            f"position without interference at every input angle (lost motion ≥ {c['lost_motion_min_floating'] * am:.2f}′): "
+            "it does not jam; it settles where the pins let it."
+        )
+    elif c["interfering_rigid"] > 0:
+        tail = (
+            f"; the rigid disc interferes over {100 * c['interfering_rigid']:.0f} % of the revolution, and floating within "
+            f"{c['float_radius']:.1f} µm does not clear it everywhere ({100 * c['interfering_floating']:.0f} % of the "
+            f"revolution; lost motion down to {c['lost_motion_min_floating'] * am:.2f}′): the pairs there must deform."
+        )
+    else:
+        tail = f"; no interference (lost motion ≥ {c['lost_motion_min_rigid'] * am:.2f}′ with the offsets held)."
+    out["explanation"] = head + tail
+    return out
+
+
 #: The reference reducer's sensitivities: summary key → (metric, unit, factor per rad or per pair).
 SENSITIVITY_METRICS = {
     "lost_motion_max": (LostMotion(), "arcmin", ARCMIN_PER_RAD),
@@ -263,7 +351,7 @@ def reference_sensitivities(drive: CycloidPin) -> dict:
     for key, (metric, unit, k) in SENSITIVITY_METRICS.items():
         s = sens[metric.name]
         rows = {}
-        for field in ERROR_FIELDS:
+        for field in drive.error_fields:
             g = float(np.sum(np.asarray(getattr(s.errors, field))))
             u = unit_of(field)
             rows[field] = {"per": {"um": "µm", "arcsec": "″", "deg": "°"}[u], "value": g * k * TO_INTERNAL[u]}
@@ -453,124 +541,12 @@ def study_outputs(drive: CycloidPin, context: AbstractStudyContext) -> StudyOutp
     return StudyOutputs(summary=summary, report=report(drive, summary), figures=figures, arrays=arrays, files={"curves.npz": curves})
 
 
-def report(drive: CycloidPin, s: dict) -> list[str]:
-    """The report sections of the reference reducer and of the Monte Carlo (Markdown lines)."""
-    L = [
-        "",
-        "## Result for the reducer analysed",
-        "",
-        f"At the input position θ_T = {s['input_angle_deg']:.4f}° (pin wheel relative to the arm):",
-        "",
-        f"- contacting pair (forward load): pin {s['contact_pair']['pin']} with tooth space {s['contact_pair']['tooth_space']}; "
-        f"reverse load: pin {s['reverse_contact_pair']['pin']} with tooth space {s['reverse_contact_pair']['tooth_space']};",
-        f"- loaded pairs (tangential clearance ≤ {s['deformation_budget_mm']:g} mm on the pin circle): "
-        f"**{s['loaded_pairs']} of the {s['loaded_pairs_out_of']}** theoretical pairs "
-        f"(over one pitch {s['loaded_pairs_over_pitch']['min']}–{s['loaded_pairs_over_pitch']['max']}, over the revolution "
-        f"{s['loaded_pairs_over_revolution']['min']}–{s['loaded_pairs_over_revolution']['max']});",
-        f"- lost motion: **{s['lost_motion_arcmin']:.3f}′** at most over the revolution "
-        f"(range {s['lost_motion_range_arcmin'][0]:.3f}′ … {s['lost_motion_range_arcmin'][1]:.3f}′; "
-        f"{s['lost_motion_at_input_angle_arcmin']:.3f}′ at θ_T)"
-        + ("; **negative somewhere: the disc interferes (jams) there**" if s["interference"] else "")
-        + ";",
-        f"- rotation error (TE) of the stage, forward load: peak-to-peak **{s['rotation_error_p2p_arcsec']:.2f}″** over "
-        f"{drive.analysis.sweep_revolutions} input revolution(s) (reverse load {s['rotation_error_reverse_p2p_arcsec']:.2f}″).",
-        "",
-        "![clearance per pin](clearance_per_pin.png)",
-        "",
-        "| pin | tooth space | flank | tangential clearance (mm) | tangential clearance (″) | normal clearance (mm) | within budget |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for p in s["pairs"]:
-        L.append(
-            f"| {p['pin']} | {p['tooth_space']} | {p['flank']} | "
-            f"{_fmt(p['tangential_clearance_mm'], '.4f') if p['can_touch'] else 'never touches'} | "
-            f"{_fmt(p['tangential_clearance_arcsec'], '.1f')} | {p['normal_clearance_mm']:.4f} | {'yes' if p['loaded'] else ''} |"
-        )
-    L += [
-        "",
-        "![clearance against the input angle](clearance_vs_input.png)",
-        "",
-        "![rotation error](rotation_error.png)",
-        "",
-        "## Errors of the reducer analysed",
-        "",
-        "| field | value |",
-        "|---|---|",
-    ]
-    L += [f"| {k} | {v} |" for k, v in s["reference_errors"].items()] or ["| (none) | |"]
-    L += [
-        "",
-        "## Sensitivities of the reducer analysed",
-        "",
-        "Derivatives at the errors above (per-space and per-pin errors: the same change on all of them); "
-        "lost motion = its maximum over the revolution, loaded pairs = the smooth surrogate (mean over positions).",
-        "",
-        "| quantity | d lost motion (′ per) | d TE p-p (″ per) | d loaded pairs (per) |",
-        "|---|---|---|---|",
-    ]
-    sens = s["sensitivities"]
-    for key in sens["lost_motion_max"]["derivatives"]:
-        a, b, c = (sens[m]["derivatives"][key] for m in ("lost_motion_max", "rotation_error_p2p", "loaded_pairs_smooth"))
-        L.append(f"| {key} (per {a['per']}) | {a['value']:.4g} | {b['value']:.4g} | {c['value']:.4g} |")
-    mc = s["monte_carlo"]
-    L += [
-        "",
-        "## Monte Carlo of the clearances over the error laws",
-        "",
-        f"{mc['samples']:,} reducers, seed {mc['seed']}; the cycle: {mc['positions']['count']} input positions "
-        f"({mc['positions']['per_pitch']} per pin pitch over {mc['positions']['revolutions']} revolution(s)).",
-        "",
-        "| error | law |",
-        "|---|---|",
-    ]
-    L += [f"| {k} | {v} |" for k, v in mc["tolerances"].items()]
-    L += ["", "| quantity | mean | std | P5 | P50 | P95 | max |", "|---|---|---|---|---|---|---|"]
-    for label, key in (
-        ("lost motion, max over the cycle (′)", "lost_motion_max_arcmin"),
-        ("lost motion, min over the cycle (′)", "lost_motion_min_arcmin"),
-        ("rotation error p-p (″)", "rotation_error_p2p_arcsec"),
-        (f"loaded pairs at θ_T (of {s['loaded_pairs_out_of']})", "loaded_pairs"),
-        ("loaded pairs, min over the cycle", "loaded_pairs_min_over_cycle"),
-    ):
-        q = mc[key]
-        L.append(
-            f"| {label} | {q['mean']:.3f} | {q['std']:.3f} | {q['percentiles']['5']:.3f} | {q['percentiles']['50']:.3f} | "
-            f"{q['percentiles']['95']:.3f} | {q['max']:.3f} |"
-        )
-    L += [
-        "",
-        f"Reducers that interfere somewhere in the cycle (lost motion < 0): {100 * mc['interference_fraction']:.2f} %"
-        + (
-            f"; the others have {mc['loaded_pairs_without_interference']['mean']:.2f} loaded pairs at θ_T on average."
-            if mc["loaded_pairs_without_interference"] and mc["interference_fraction"] > 0
-            else "."
-        ),
-        "",
-        "![Monte Carlo](monte_carlo.png)",
-        "",
-        "## The clearance analysis: assumptions",
-        "",
-    ]
-    L += [f"- {k.replace('_', ' ')}: {v}." for k, v in s["clearance_assumptions"].items()]
-    L += [
-        f"- All solves converged: {'yes' if s['sweep']['all_solves_converged'] else 'NO (see summary.json)'}"
-        + (f"; Monte Carlo: {mc['not_converged_solves']} solves did not converge." if mc["not_converged_solves"] else "."),
-        "",
-        "Files: `clearance_per_pin.png`, `clearance_vs_input.png`, `rotation_error.png`, `monte_carlo.png`: the plots above; "
-        "`samples.npz` also holds the per-reducer clearances (`lost_motion_max_arcmin`, `loaded_pairs`, "
-        "`tangential_clearance_mm`, …) and the reference reducer's curves (`reference_*`).",
-        "",
-    ]
-    return L
-
-
 __all__ = (
     "SAMPLE_SCALARS",
     "SampleOutputs",
     "monte_carlo_summary",
     "reference_sensitivities",
     "reference_summary",
-    "report",
     "sample_outputs",
     "study_outputs",
     "tolerance_rows",

@@ -1,7 +1,8 @@
 """Cycloid-pin reducer: its study-file table, ``[drive] type = "cycloid_pin"``.
 
     [drive]             type = "cycloid_pin", z_pins, z_lobes (optional, = z_pins − 1),
-                        pin_circle_radius_mm, pin_radius_mm, eccentricity_mm (or K1)
+                        pin_circle_radius_mm, pin_radius_mm, eccentricity_mm (or K1),
+                        process ("form", the default, or "generating": how the disc is ground)
     [drive.wheel]       the profile the grinding wheel is dressed to: pin_circle_radius_mm (R_Z),
                         pin_radius_mm (r_Z), rotation_arcsec (optional)
       (or [drive.modification]   shift_mm, equidistant_mm, rotation_arcsec)
@@ -13,8 +14,10 @@
                         `CycloidErrors` field (a number; per space or pin also a list, or a table
                         { amplitude_um | amplitude_arcsec, phase_deg, order } for A sin(2π·order·n/N + φ))
 
-Angles of the error fields: ``index_offset`` and ``indexing`` in arcseconds, the ``*_phase``
-fields in degrees; every other field in µm. The Monte Carlo laws of the errors are the study
+Angles of the error fields: ``index_offset``, ``indexing``, ``generating_chain`` and
+``pitch_accumulated`` in arcseconds, the ``*_phase`` fields in degrees; every other field in µm.
+The fields of ``[drive.reference]`` and ``[errors.NAME]`` are those of the disc's process
+(a form-ground disc has no generating-machine errors). The Monte Carlo laws of the errors are the study
 file's ``[errors.NAME]`` tables (one per field; see docs/study-files.md).
 """
 
@@ -28,14 +31,14 @@ import numpy as np
 
 from ..core.schema import ConfigError, Table
 from ..core.units import ARCSEC_PER_RAD
-from .cycloid_pin_geometry import ERROR_FIELDS, PER_PIN, PER_SPACE, CycloidModification
+from .cycloid_pin_geometry import ANGLE_FIELDS, PER_PIN, PER_SPACE, PROCESSES, CycloidModification
 
 
 def unit_of(field: str) -> str:
     """The unit suffix of an error field in ``[drive.reference]``: deg for phases, arcsec for index angles, else um."""
     if field.endswith("_phase"):
         return "deg"
-    if field in ("index_offset", "indexing"):
+    if field in ANGLE_FIELDS:
         return "arcsec"
     return "um"
 
@@ -67,7 +70,9 @@ def drive_arguments(t: Table) -> dict[str, Any]:
         K = t.number("K1", positive=True) if t.has("K1") else None
         if a is None and K is None:
             raise ConfigError(f"{t.where}: missing `eccentricity_mm` (crank eccentricity a, mm) or `K1` (= a z_b / R_z)")
+    process = t.string("process", "form", choices=tuple(PROCESSES))
     kw: dict[str, Any] = {"z_pins": zb, "z_lobes": zl, "pin_circle_radius": R, "pin_radius": r, "eccentricity": a, "K1": K}
+    kw["process"] = process
     if t.has("wheel") and t.has("modification"):
         raise ConfigError(f"{t.where}: give [drive.wheel] (R_Z, r_Z) or [drive.modification] (shift, equidistant), not both")
     if t.has("wheel"):
@@ -85,7 +90,7 @@ def drive_arguments(t: Table) -> dict[str, Any]:
         m.finish()
     kw["analysis"] = _analysis(t, zb)
     counts = {"space": (zl if zl is not None else zb - 1), "pin": zb}
-    kw["reference"], given = reference_errors(_sub(t, "reference"), counts)
+    kw["reference"], given = reference_errors(_sub(t, "reference"), counts, PROCESSES[process])
     kw["reference_record"] = json.dumps(given)
     return kw
 
@@ -134,13 +139,15 @@ def _field_key(t: Table, field: str) -> str | None:
     return want if t.has(want) else None
 
 
-def reference_errors(t: Table, counts: dict[str, int]) -> tuple[dict[str, Any], dict[str, Any]]:
+def reference_errors(
+    t: Table, counts: dict[str, int], fields: tuple[str, ...] = PROCESSES["form"]
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """The error fields of ``[drive.reference]`` (internal units) and how they were given (for summaries).
 
-    `counts`: ``{"space": z_a, "pin": z_b}``.
+    `counts`: ``{"space": z_a, "pin": z_b}``; `fields`: the error fields of the disc's process.
     """
     values, given = {}, {}
-    for field in ERROR_FIELDS:
+    for field in fields:
         key = _field_key(t, field)
         if key is None:
             continue

@@ -88,7 +88,7 @@ otherwise the figures are over the hyper-period, an upper bound (see `output_rev
 
 The rest of the harmonic drive: `harmonic_sources` (classes, `HarmonicSource`, run
 settings), `harmonic_estimate` (Liu's estimate, class lines, beats, labelled record
-lines), `harmonic_assembly` (assembly phases of one unit), `harmonic_outputs` (what
+lines), `harmonic_assembly` (assembly phases of one unit), `harmonic_outputs` and `harmonic_readings` (what
 `gearte run` writes); their public names are re-exported here.
 """
 

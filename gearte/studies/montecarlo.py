@@ -106,14 +106,10 @@ def sample_keys(key: PRNGKeyArray, start, size: int) -> PRNGKeyArray:
 
 
 @eqx.filter_jit
-def _run_chunk(fn, key, start, n_blocks: int, block: int):
-    idx = (start + jnp.arange(n_blocks * block, dtype=jnp.uint32)).reshape(n_blocks, block)
-
-    def one_block(ix):
-        return jax.vmap(fn)(jax.vmap(lambda i: jax.random.fold_in(key, i))(ix))
-
-    out = jax.lax.map(one_block, idx)
-    return jax.tree.map(lambda x: x.reshape((n_blocks * block,) + x.shape[2:]), out)
+def _run_block(fn, key, start, block: int):
+    """Samples ``start … start + block − 1``, vectorised: the one compiled program of a study."""
+    idx = start + jnp.arange(block, dtype=jnp.uint32)
+    return jax.vmap(fn)(jax.vmap(lambda i: jax.random.fold_in(key, i))(idx))
 
 
 def default_block_size(bytes_per_sample: int, *, budget_bytes: int = 128 * 2**20) -> int:
@@ -150,12 +146,14 @@ def monte_carlo(
       runs reuse the compiled code).
     - `key`: integer seed or `jax.random` key; sample i uses ``fold_in(key, i)``.
     - `n_samples`: number of samples (default 50,000).
-    - `chunk_size`: samples per compiled call (rounded up to whole blocks, at least two;
-      default 16 blocks). Sets the progress-bar step; never changes the results.
-    - `block_size`: samples computed together in one vectorised block; bounds memory.
+    - `chunk_size`: samples between progress-bar updates (rounded up to whole blocks;
+      default 16 blocks). Never changes the results, nor what is compiled.
+    - `block_size`: samples computed together in one vectorised block, the one compiled
+      program of the study (compiled once, whatever `n_samples`); bounds memory.
       Default: from ``fn.bytes_per_sample()`` (128 MiB per block), else 256. Results are
-      bit-identical for any chunk size at a given block size; another block size may
-      change them in the last bit.
+      bit-identical for any chunk size and any number of samples at a given block size
+      (the first n samples of a longer run are those of an n-sample run); another block
+      size may change them in the last bit.
     - `progress`: show a progress bar on stderr (default: when stderr is a terminal).
 
     **Returns:** a `MonteCarloResult` with the values as a NumPy array (a pytree of them when `fn`
@@ -175,25 +173,24 @@ def monte_carlo(
         per = int(sizer()) if callable(sizer) else 0  # pyright: ignore[reportArgumentType]
         block_size = default_block_size(per) if per else 256
     block = int(block_size)
-    # At least two blocks per call: XLA simplifies a loop of one trip into different code,
-    # which can round differently in the last bit.
-    blocks_per_call = max(2, -(-int(chunk_size) // block)) if chunk_size is not None else 16
-    blocks_per_call = max(2, min(blocks_per_call, -(-n_samples // block)))
-    chunk = blocks_per_call * block
-    n_calls = -(-n_samples // chunk)
+    # Every block is the same compiled program (one compilation per study and block size, whatever
+    # the number of samples or the chunk size), so the chunk only sets how often progress is shown.
+    n_blocks = -(-n_samples // block)
+    blocks_per_chunk = max(1, -(-int(chunk_size) // block)) if chunk_size is not None else 16
+    blocks_per_chunk = min(blocks_per_chunk, n_blocks)
+    chunk = blocks_per_chunk * block
     if progress is None:
-        progress = n_calls > 1 and sys.stderr.isatty()
+        progress = n_blocks > blocks_per_chunk and sys.stderr.isatty()
     t0 = time.perf_counter()
     parts = []
     with tqdm(total=n_samples, desc=desc, unit="samples", disable=not progress, leave=False) as bar:
-        for c in range(n_calls):
-            start = c * chunk
-            # Every call has the same shape (one compilation); samples past n_samples are dropped.
-            out = _run_chunk(fn, key, jnp.asarray(start, dtype=jnp.uint32), blocks_per_call, block)
-            parts.append(out)
-            if progress:
-                jax.block_until_ready(out)
-                bar.update(min(chunk, n_samples - start))
+        for b in range(n_blocks):
+            start = b * block
+            # Samples past n_samples in the last block are dropped.
+            parts.append(_run_block(fn, key, jnp.asarray(start, dtype=jnp.uint32), block))
+            if progress and ((b + 1) % blocks_per_chunk == 0 or b + 1 == n_blocks):
+                jax.block_until_ready(parts[-1])
+                bar.update(min(start + block, n_samples) - bar.n)
     # One array, or a pytree of them when `fn` returns several outputs per sample.
     values = jax.tree.map(lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:n_samples], *parts)
     return MonteCarloResult(values=values, n_samples=int(n_samples), chunk_size=chunk, block_size=block, seconds=time.perf_counter() - t0)

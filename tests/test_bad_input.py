@@ -1,0 +1,346 @@
+"""Every bad input answered cleanly: from the command line (exit status 2, one message naming the file,
+table, key or option, no traceback, nothing written or deleted) and from Python (a ValueError or
+ConfigError with the same message). Interrupts are in test_interrupt.py, fuzzed study files in
+test_fuzz_study_files.py.
+"""
+
+import importlib
+import json
+import math
+import os
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gearte
+from gearte import cli
+from gearte.cli import run as run_mod
+from gearte.cli.compare import RunFolderError, compare_runs
+from gearte.cli.config import ConfigError, load_study
+from gearte.cli.io import OutputError
+from gearte.cli.run import estimate_cost, run_study
+
+main_mod = importlib.import_module("gearte.cli.main")  # the module (gearte.cli.main is also the function's name)
+ROOT = Path(__file__).resolve().parents[1]
+RANDOM = ROOT / "examples" / "planetary_wang2013_random.toml"
+CYCLOID = ROOT / "examples" / "cycloid_yao2001_modified.toml"
+
+
+def snapshot(folder: Path) -> dict[str, bytes | None]:
+    """Every path under `folder` (hidden ones included) with its bytes (None for folders)."""
+    return {str(p.relative_to(folder)): (p.read_bytes() if p.is_file() else None) for p in sorted(folder.rglob("*"))}
+
+
+def refused(capsys, tmp_path, *args, message: str, computing: bool = False, monkeypatch=None) -> str:
+    """`gearte ARGS` exits 2 with one plain message containing `message`, and changes nothing under tmp_path.
+    With a monkeypatch, computing anything fails the test (the refusal came before any work)."""
+    if monkeypatch is not None and not computing:
+
+        def no_work(*a, **k):
+            raise AssertionError("computed before refusing")
+
+        monkeypatch.setattr(run_mod, "_run", no_work)
+        monkeypatch.setattr(main_mod, "estimate_cost", no_work)
+    before = snapshot(tmp_path)
+    capsys.readouterr()
+    assert cli.main([str(a) for a in args]) == 2
+    cap = capsys.readouterr()
+    assert message in cap.err, cap.err
+    assert cap.err.startswith("gearte: error") and cap.err.count("\n") == 1 and "Traceback" not in cap.err, cap.err
+    assert snapshot(tmp_path) == before
+    return cap.err
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """Two finished planetary runs (64 samples), copied by the tests that alter them."""
+    base = tmp_path_factory.mktemp("runs")
+    a, b = base / "a", base / "b"
+    assert cli.main(["run", str(RANDOM), "--out", str(a), "--samples", "64", "--seed", "1"]) == 0
+    assert cli.main(["run", str(ROOT / "examples" / "planetary_wang2013_half.toml"), "--out", str(b), "--samples", "64"]) == 0
+    return a, b
+
+
+def copy_run(src: Path, dst: Path) -> Path:
+    dst.mkdir(parents=True)
+    for p in src.iterdir():
+        (dst / p.name).write_bytes(p.read_bytes())
+    return dst
+
+
+# ---------------------------------------------------------------- --out
+
+
+def test_out_dot_refuses_the_users_folder(capsys, tmp_path, monkeypatch):
+    (tmp_path / "mine.txt").write_text("the user's own file")
+    monkeypatch.chdir(tmp_path)
+    refused(capsys, tmp_path, "run", RANDOM, "--out", ".", message="--out .: is the current folder", monkeypatch=monkeypatch)
+    with pytest.raises(OutputError, match="current folder"):
+        run_study(load_study(RANDOM), ".")
+
+
+def test_out_refuses_a_folder_with_other_files(capsys, tmp_path, monkeypatch):
+    user = tmp_path / "papers"
+    user.mkdir()
+    (user / "notes.md").write_text("notes")
+    refused(capsys, tmp_path, "run", RANDOM, "--out", user, message="files gearte did not write", monkeypatch=monkeypatch)
+    with pytest.raises(OutputError, match="files gearte did not write"):
+        run_study(load_study(RANDOM), user)
+
+
+def test_out_replaces_its_own_result_but_not_one_the_user_added_to(capsys, tmp_path, finished, monkeypatch):
+    res = copy_run(finished[0], tmp_path / "res")
+    assert cli.main(["run", str(RANDOM), "--out", str(res), "--samples", "32"]) == 0  # its own result: replaced
+    assert json.loads((res / "summary.json").read_text())["samples"] == 32
+    (res / "my_notes.md").write_text("mine")
+    refused(capsys, tmp_path, "run", RANDOM, "--out", res, message="files gearte did not write", monkeypatch=monkeypatch)
+
+
+def test_out_an_existing_file(capsys, tmp_path, monkeypatch):
+    f = tmp_path / "f"
+    f.write_text("x")
+    refused(capsys, tmp_path, "run", RANDOM, "--out", f, message=f"--out {f}: is an existing file", monkeypatch=monkeypatch)
+
+
+def test_out_below_a_file(capsys, tmp_path, monkeypatch):
+    f = tmp_path / "f"
+    f.write_text("x")
+    refused(
+        capsys, tmp_path, "run", RANDOM, "--out", f / "sub", message="is a file, so no folder can be made below it", monkeypatch=monkeypatch
+    )
+
+
+def test_out_where_nothing_can_be_written(capsys, tmp_path, monkeypatch):
+    # /proc accepts no new folders, even for root.
+    refused(
+        capsys,
+        tmp_path,
+        "run",
+        RANDOM,
+        "--out",
+        "/proc/gearte-results",
+        message="--out /proc/gearte-results: cannot",
+        monkeypatch=monkeypatch,
+    )
+
+
+def test_out_a_symbolic_link_or_empty(capsys, tmp_path, monkeypatch):
+    target = tmp_path / "target"
+    target.mkdir()
+    (tmp_path / "link").symlink_to(target)
+    refused(capsys, tmp_path, "run", RANDOM, "--out", tmp_path / "link", message="symbolic link", monkeypatch=monkeypatch)
+    refused(capsys, tmp_path, "run", RANDOM, "--out", "", message="--out: empty", monkeypatch=monkeypatch)
+
+
+def test_out_the_folder_holding_the_study_file(capsys, tmp_path, monkeypatch):
+    cfg = tmp_path / "study" / "s.toml"
+    cfg.parent.mkdir()
+    cfg.write_text(RANDOM.read_text())
+    refused(capsys, tmp_path, "run", cfg, "--out", cfg.parent, message="input", monkeypatch=monkeypatch)
+
+
+def test_a_failed_run_leaves_no_parent_folders(capsys, tmp_path, monkeypatch):
+    def boom(*a, **k):
+        raise ValueError("simulated failure while computing")
+
+    monkeypatch.setattr(run_mod, "_run", boom)
+    refused(capsys, tmp_path, "run", RANDOM, "--out", tmp_path / "new" / "deeper" / "res", message="simulated failure", computing=True)
+
+
+# ---------------------------------------------------------------- study files
+
+
+def test_binary_study_file_named(capsys, tmp_path):
+    cfg = tmp_path / "s.toml"
+    cfg.write_bytes(bytes(range(256)))
+    refused(capsys, tmp_path, "check", cfg, message=f"{cfg}: not a UTF-8 text file")
+    refused(capsys, tmp_path, "run", cfg, "--out", tmp_path / "o", message=f"{cfg}: not a UTF-8 text file")
+    with pytest.raises(ConfigError, match="not a UTF-8"):
+        load_study(cfg)
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        (
+            "[errors.carrier_assembly]",
+            "[errors.carrier_asembly]",
+            "unknown error source `carrier_asembly` (did you mean `carrier_assembly`?)",
+        ),
+        ("[errors.carrier_assembly]", "[erors.carrier_assembly]", "unknown table `[erors]` (did you mean `[errors]`?)"),
+        ("samples = 50000", "samples = 4294967296", "[study] samples: at most 2³² − 1"),
+    ],
+    ids=["misspelt source", "misspelt table", "samples beyond one key"],
+)
+def test_study_file_mistakes_named_by_check_and_run(old, new, message, capsys, tmp_path, monkeypatch):
+    text = RANDOM.read_text()
+    assert old in text
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(text.replace(old, new))
+    refused(capsys, tmp_path, "check", cfg, message=message)
+    refused(capsys, tmp_path, "run", cfg, "--out", tmp_path / "o", message=message, monkeypatch=monkeypatch)
+    with pytest.raises(ConfigError, match=r"s\.toml: "):
+        load_study(cfg)
+
+
+def test_option_beyond_one_key_named_as_the_option(capsys, tmp_path, monkeypatch):
+    for command in (["check", RANDOM], ["run", RANDOM, "--out", tmp_path / "o"]):
+        refused(capsys, tmp_path, *command, "--samples", 2**32, message="--samples: must be in [1, 2³² − 1]", monkeypatch=monkeypatch)
+    with pytest.raises(ConfigError, match="--samples"):
+        load_study(RANDOM, samples=2**32)
+
+
+def test_cycloid_unknown_key_in_drive(capsys, tmp_path):
+    text = CYCLOID.read_text()
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text.replace("z_lobes = 25", "z_lobes = 25\nz_lobs = 25", 1))
+    refused(capsys, tmp_path, "check", cfg, message="[drive]: unknown key `z_lobs` (did you mean `z_lobes`?)")
+
+
+def test_a_run_of_days_is_estimated_and_needs_yes(capsys, tmp_path):
+    err = refused(capsys, tmp_path, "run", RANDOM, "--out", tmp_path / "o", "--samples", 2**32 - 1, message="add --yes to run it anyway")
+    assert "--samples 4,294,967,295: about" in err and "samples/s on this machine" in err and "96.0 GiB" in err
+
+
+def test_estimate_and_yes(capsys, tmp_path, monkeypatch):
+    study = load_study(RANDOM, samples=1000)
+    # Per sample a planetary run keeps te, te_rad and index: 3 × 8 bytes; no drive outputs.
+    assert estimate_cost(study).bytes == 24 * 1000 and estimate_cost(study).seconds is None
+    c = estimate_cost(study, measure_above=10)
+    assert c.seconds is not None and c.rate is not None and c.seconds == pytest.approx(1000 / c.rate)
+    monkeypatch.setattr(run_mod, "MEASURE_ABOVE", 10)
+    monkeypatch.setattr(main_mod, "CONFIRM_SECONDS", 0.0)
+    refused(capsys, tmp_path, "run", RANDOM, "--out", tmp_path / "o", "--samples", 200, message="--samples 200: about")
+    assert cli.main(["run", str(RANDOM), "--out", str(tmp_path / "o"), "--samples", "200", "--yes"]) == 0
+    assert "--samples 200: about" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- compare
+
+
+def test_compare_out_one_of_the_inputs(capsys, tmp_path, finished, monkeypatch):
+    a = copy_run(finished[0], tmp_path / "a")
+    b = copy_run(finished[1], tmp_path / "b")
+    refused(capsys, tmp_path, "compare", a, b, "--out", a, message=f"--out {a}: is, holds or lies inside the input")
+    refused(capsys, tmp_path, "compare", a, b, "--out", a / "cmp", message="lies inside the input")
+    with pytest.raises(OutputError):
+        compare_runs([a, b], b)
+
+
+def _broken_runs(tmp_path: Path, a: Path) -> dict[str, tuple[Path, str]]:
+    runs = {}
+    d = copy_run(a, tmp_path / "bad_json")
+    (d / "summary.json").write_text("{")
+    runs["corrupt summary.json"] = (d, f"{d / 'summary.json'}: not valid JSON")
+    d = copy_run(a, tmp_path / "bad_npz")
+    (d / "samples.npz").write_bytes(b"garbage")
+    runs["corrupt samples.npz"] = (d, f"{d / 'samples.npz'}: cannot be read")
+    d = copy_run(a, tmp_path / "pickled")
+    np.savez(d / "samples.npz", te=np.array([{"a": 1}] * 64, dtype=object))
+    runs["pickled samples.npz"] = (d, f"{d / 'samples.npz'}: cannot be read")
+    d = copy_run(a, tmp_path / "short")
+    np.savez(d / "samples.npz", te=np.ones(3))
+    runs["samples.npz of another length"] = (d, "must hold 64 finite numbers")
+    d = copy_run(a, tmp_path / "missing_field")
+    s = json.loads((d / "summary.json").read_text())
+    del s["te"]["mean"]
+    (d / "summary.json").write_text(json.dumps(s))
+    runs["summary missing a field"] = (d, f"{d / 'summary.json'}: missing `te.mean`")
+    f = tmp_path / "a_file"
+    f.write_text("x")
+    runs["a file as a run"] = (f, f"{f}: a file, not a results folder")
+    runs["no such run"] = (tmp_path / "nothing", "no such folder")
+    d = tmp_path / "empty"
+    d.mkdir()
+    runs["a folder that is not a run"] = (d, "not a finished gearte run (no summary.json)")
+    return runs
+
+
+BROKEN = [
+    "corrupt summary.json",
+    "corrupt samples.npz",
+    "pickled samples.npz",
+    "samples.npz of another length",
+    "summary missing a field",
+    "a file as a run",
+    "no such run",
+    "a folder that is not a run",
+]
+
+
+@pytest.mark.parametrize("case", BROKEN)
+def test_compare_a_broken_run(case, capsys, tmp_path, finished, monkeypatch):
+    a = copy_run(finished[0], tmp_path / "a")
+    bad, message = _broken_runs(tmp_path, a)[case]
+
+    def no_pickles(*a, **k):
+        raise AssertionError("a pickle was loaded")
+
+    monkeypatch.setattr(pickle, "load", no_pickles)
+    monkeypatch.setattr(pickle, "loads", no_pickles)
+    err = refused(capsys, tmp_path, "compare", a, bad, "--out", tmp_path / "cmp", message=message)
+    assert "allow_pickle" not in err
+    with pytest.raises(RunFolderError):
+        compare_runs([a, bad], tmp_path / "cmp")
+
+
+def test_compare_a_comparison_as_a_run(capsys, tmp_path, finished):
+    a, b = (copy_run(r, tmp_path / r.name) for r in finished)
+    assert cli.main(["compare", str(a), str(b), "--out", str(tmp_path / "cmp")]) == 0
+    refused(capsys, tmp_path, "compare", a, tmp_path / "cmp", "--out", tmp_path / "cmp2", message="a comparison, not a run")
+    # A comparison replaces its own earlier comparison.
+    assert cli.main(["compare", str(b), str(a), "--out", str(tmp_path / "cmp")]) == 0
+
+
+def test_compare_runs_of_different_drives_on_what_they_share(capsys, tmp_path, finished):
+    a = copy_run(finished[0], tmp_path / "planetary")
+    h = copy_run(finished[1], tmp_path / "harmonic_arcmin")
+    # The second run as another drive's, reported in arcmin: compared in the first run's arcsec.
+    s = json.loads((h / "summary.json").read_text())
+    s["drive"] = {"type": "harmonic"}
+    for k in ("min", "max", "mean", "std"):
+        s["te"][k] /= 60.0
+    s["te"]["percentiles"] = {p: v / 60.0 for p, v in s["te"]["percentiles"].items()}
+    s["te"]["unit"] = "arcmin"
+    (h / "summary.json").write_text(json.dumps(s))
+    with np.load(h / "samples.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["te"] = arrays["te"] / 60.0
+    np.savez(h / "samples.npz", **arrays)
+    res = compare_runs([a, h], tmp_path / "cmp")
+    assert res["unit"] == "arcsec" and res["drives"] == ["harmonic", "planetary_2kh"]
+    half = json.loads((finished[1] / "summary.json").read_text())["te"]["mean"]
+    assert res["runs"][1]["mean"] == pytest.approx(half, rel=1e-12)
+    assert "different drives" in (tmp_path / "cmp" / "report.md").read_text()
+    # Different metrics share nothing to compare: refused with the reason.
+    s["te"]["metric"] = "peak_to_peak"
+    (h / "summary.json").write_text(json.dumps(s))
+    refused(capsys, tmp_path, "compare", a, h, "--out", tmp_path / "cmp2", message="the runs measure different metrics: peak")
+
+
+# ---------------------------------------------------------------- Python API and options
+
+
+@pytest.mark.parametrize(
+    "magnitude, phase, message",
+    [(-5, 0, "must be ≥ 0"), (math.nan, 0, "must be finite"), (5, math.inf, "Eccentricity.phase"), ([1.0, -2.0], 0, "must be ≥ 0")],
+    ids=["negative", "nan", "infinite phase", "negative in a list"],
+)
+def test_eccentricity_refuses_what_fixed_refuses(magnitude, phase, message):
+    with pytest.raises(ValueError, match=message):
+        gearte.Eccentricity(magnitude, phase)
+
+
+def test_version():
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.run(
+        [sys.executable, "-c", "import sys, gearte_command; sys.exit(gearte_command.main())", "--version"],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
+    assert p.returncode == 0 and p.stdout.strip() == f"gearte {gearte.__version__}"

@@ -1,0 +1,36 @@
+"""`gearte identify` and `gearte assemble`: results folders, and bad input refused with exit status 2."""
+
+import json
+from pathlib import Path
+
+from gearte import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+STUDY = ROOT / "examples" / "planetary_wang2013_random.toml"
+RECORD = ROOT / "examples" / "records" / "planetary_wang2013_record.csv"
+
+
+def test_identify_writes_its_folder(tmp_path):
+    out = tmp_path / "id"
+    assert cli.main(["identify", str(STUDY), str(RECORD), "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert sorted(p.name for p in out.iterdir()) == sorted(s["files"]) == ["measured_vs_identified.png", "report.md", "summary.json"]
+    rows = {r["source"]: r for r in s["identified"]}
+    # the example's true sun eccentricity (examples/records/make_records.py): 13 µm at 0.6 rad
+    lo, hi = rows["sun_manufacturing"]["magnitude_95_um"]
+    assert lo <= 13.0 <= hi
+    assert next(g["kind"] for g in s["groups"]) == "combined"
+
+
+def test_bad_record_and_parts_are_refused(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("input_angle_rad,te_arcsec\n" + "\n".join(f"{i * 0.1},1" for i in [0, 2, 1] + list(range(3, 30))))
+    assert cli.main(["identify", str(STUDY), str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gearte: error") and "must increase strictly" in err and "Traceback" not in err
+    parts = tmp_path / "parts.csv"
+    parts.write_text("source,magnitude_um,phase_rad\nmoon_manufacturing,1,0\n")
+    assert cli.main(["assemble", str(parts), "--study", str(STUDY), "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err
+    assert "not an error source" in err and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv", "parts.csv"]
