@@ -61,6 +61,8 @@ BEARING_FACES = 64
 MAX_STEPS = 200
 #: A force residual below this many machine epsilons of the largest term it is computed from is at rounding level.
 ROUNDING_FACTOR = 64.0
+#: Sufficient decrease (Armijo) for taking the full Newton step without a line search.
+ARMIJO = 1e-4
 #: Largest number of safeguarded Newton iterations of the exact line search along each Newton direction.
 LINE_SEARCH_STEPS = 40
 #: The line search stops when the directional derivative has fallen below this fraction of its value at the start.
@@ -235,7 +237,9 @@ def _newton(s: ContactSystem, q0):
         q, g, act, i, _ = state
         L = jnp.linalg.cholesky(hessian(s, q))
         dq = -jax.scipy.linalg.cho_solve((L, True), g)
-        t = _line_search(s, q, dq)
+        # The full step where it decreases Φ enough (Armijo): the whole set of closed contacts may change at once.
+        full = potential(s, q + dq) <= potential(s, q) + ARMIJO * jnp.dot(g, dq)
+        t = jax.lax.cond(full, lambda: jnp.ones((), dtype=q.dtype), lambda: _line_search(s, q, dq))
         qn = q + t * dq
         gn = gradient(s, qn)
         actn = _active(s, qn)
