@@ -35,7 +35,7 @@ lint: $(STAMP)
 	$(BIN)/basedpyright --level error
 
 test: lint
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_planetary_mc.py

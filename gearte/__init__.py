@@ -18,6 +18,7 @@ from .core.extrema import (
     spectrum as spectrum,
 )
 from .core.metrics import AbstractMetric as AbstractMetric, Peak as Peak, PeakToPeak as PeakToPeak, RMS as RMS
+from .core.cache import default_cache_dir as default_cache_dir, enable_compilation_cache as enable_compilation_cache
 from .core.precision import enable_x64 as enable_x64, require_x64 as require_x64, x64_enabled as x64_enabled
 from .core.records import (
     Record as Record,

@@ -16,8 +16,10 @@ import json
 import shlex
 import signal
 import sys
+import warnings
 
 from .. import __version__
+from ..core.cache import cache_wanted, enable_compilation_cache
 from ..core.precision import enable_x64
 from ..core.schema import ConfigError
 from ..standards.iso1328 import iso1328_tolerances
@@ -111,6 +113,13 @@ def _parser() -> argparse.ArgumentParser:
     _overrides(r)
     r.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar (default: on a terminal)")
     r.add_argument("--yes", action="store_true", help="run even when the estimated time or size is large (asked above 15 min or 2 GiB)")
+    r.add_argument(
+        "--compile-cache",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="keep compiled programs on disk for the next run (default: on; folder: $GEARTE_CACHE_DIR, else ~/.cache/gearte/jax; "
+        "GEARTE_COMPILATION_CACHE=0 also turns it off)",
+    )
     c = sub.add_parser("compare", help="compare finished runs side by side")
     c.add_argument("runs", nargs="+", help="results folders of `gearte run`")
     c.add_argument("--out", required=True, help="folder for the comparison report (not one of the runs)")
@@ -177,6 +186,10 @@ def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
     # gearte's geometry needs float64; the command line turns it on before any array exists.
     enable_x64()
+    if args.command != "grade" and getattr(args, "compile_cache", True) and cache_wanted():
+        enable_compilation_cache()  # a second run of a study compiles nothing (gearte.core.cache)
+        # An unreadable or unwritable cache entry only means compiling again: not the user's concern.
+        warnings.filterwarnings("ignore", message=r"Error (reading|writing) persistent compilation cache entry")
     if args.command == "grade":
         tol = iso1328_tolerances(
             standard=args.standard,
