@@ -3,6 +3,7 @@ import sys
 from pathlib import Path
 
 import jax
+import pytest
 
 # As optimistix's tests do: float64 and strict dtype promotion, so silent int/float or
 # float32/float64 mixing in the library fails loudly here. (Importing gearte changes no
@@ -24,11 +25,12 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 
 # ---------------------------------------------------------------- scheduling on the workers
-# `make test` runs the suite on two workers with ``--dist loadgroup --no-loadscope-reorder``:
-# each group below runs whole on one worker, so its tests (and its notebook, run in the test
-# process) share the functions compiled for them and the session fixtures; groups start in
-# decreasing order of their cost (longest first, so that the two workers finish together).
-# A test file not listed is its own group.
+# `make test` runs the suite on two workers (``-n 2 --dist loadgroup --no-loadscope-reorder``) with the
+# scheduler below: each group runs whole on one worker, so its tests (and its notebook, run in the test
+# process) share the functions compiled for them and the session fixtures; groups start in decreasing
+# order of their cost (longest first, so that the two workers finish together). A test file not listed
+# is its own group. (The scheduler names the groups itself: xdist's ``xdist_group`` marks no longer
+# reach its scheduler under pytest ≥ 9.2.)
 GROUPS = {
     "test_cycloid": "cycloid",
     "test_cycloid_grinding": "cycloid",
@@ -38,6 +40,7 @@ GROUPS = {
     "test_budget": "planetary_optimise",
     "test_sensitivity": "planetary_optimise",
     "test_identify": "identification",
+    "test_identify_grid": "identification",
     "test_assemble": "identification",
     "test_identify_cli": "identification",
     "test_montecarlo": "planetary",
@@ -66,19 +69,32 @@ COST_S = {
 }
 
 
-def _group(item) -> tuple[str, bool]:
-    path = Path(str(item.fspath))
-    if path.stem == "test_notebooks" and item.originalname == "test_notebook_runs":
-        return NOTEBOOK_GROUPS.get(item.callspec.params["path"].name, "notebooks"), True
-    return GROUPS.get(path.stem, path.stem), False
+def group_of(nodeid: str) -> tuple[str, bool]:
+    """The group of a test (by its node id), and whether it is a notebook's run."""
+    path, _, name = nodeid.partition("::")
+    stem = Path(path).stem
+    if stem == "test_notebooks" and name.startswith("test_notebook_runs["):
+        return NOTEBOOK_GROUPS.get(name[len("test_notebook_runs[") : -1], "notebooks"), True
+    return GROUPS.get(stem, stem), False
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
-    import pytest
-
-    keyed = []
+    del config
+    order = []
     for i, item in enumerate(items):
-        group, notebook = _group(item)
-        item.add_marker(pytest.mark.xdist_group(group))
-        keyed.append(((-COST_S.get(group, 0), group, notebook, i), item))
-    items[:] = [item for _, item in sorted(keyed, key=lambda k: k[0])]
+        group, notebook = group_of(item.nodeid)
+        order.append(((-COST_S.get(group, 0), group, notebook, i), item))
+    items[:] = [item for _, item in sorted(order, key=lambda k: k[0])]
+
+
+def pytest_xdist_make_scheduler(config, log):
+    from xdist.scheduler import LoadScopeScheduling
+
+    class GroupScheduling(LoadScopeScheduling):
+        """xdist's scope scheduling with `group_of` as the scope."""
+
+        def _split_scope(self, nodeid: str) -> str:
+            return group_of(nodeid)[0]
+
+    return GroupScheduling(config, log)
