@@ -250,14 +250,7 @@ def grid_problem(
     rows, left, weight = zip(*(_rows(r, grid, grid_step) for r in recs))
     turns = tuple(tuple(sorted((k, float(v)) for k, v in t.items())) for t in turn_list)
 
-    def stacked(p):
-        out = []
-        for t, r in zip(turns, rows):
-            te = drive.te(drive.response(errors_of(drive, base, sources, p, dict(t))))
-            out.append(1e6 * te[jnp.asarray(r)])
-        return jnp.concatenate(out)
-
-    jac = np.asarray(jax.jit(jax.jacfwd(stacked))(jnp.asarray(origin)))  # µrad per unit of each parameter
+    jac = np.asarray(_jacobian(drive, base, sources, turns, rows, jnp.asarray(origin)))  # µrad per unit of each parameter
     if not np.all(np.isfinite(jac)):
         raise ValueError(f"identify: the model's TE is not differentiable at the start point (the Jacobian of {type(drive).__name__} is not finite)")
     offs = np.zeros((jac.shape[0], len(recs)))
@@ -290,3 +283,15 @@ def grid_problem(
         starts=int(starts),
         max_steps=int(max_steps),
     )
+
+
+@eqx.filter_jit
+def _jacobian(drive, base, sources, turns, rows, p):
+    def stacked(p):
+        out = []
+        for t, r in zip(turns, rows):
+            te = drive.te(drive.response(errors_of(drive, base, sources, p, dict(t))))
+            out.append(1e6 * te[jnp.asarray(r)])
+        return jnp.concatenate(out)
+
+    return jax.jacfwd(stacked)(p)
