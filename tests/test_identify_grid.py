@@ -13,12 +13,14 @@ import pytest
 
 import gearte
 from gearte.cli.config import load_study
+from gearte.drives.cycloid_pin import CycloidPin
 from gearte.identification import RecordError, identification_problem, identify, synthetic_record
 from gearte.identification.fit import _solve
 from gearte.identification.records import MeasuredRecord, encoder_noise
 
 ROOT = Path(__file__).resolve().parents[1]
 CYCLOID = load_study(ROOT / "examples" / "cycloid_yao2001_modified.toml").drive
+assert isinstance(CYCLOID, CycloidPin)
 ADJUST = ["dressing_x", "setup_eccentricity", "pin_circle_eccentricity", "setup_phase"]
 TRUTH = {"dressing_x": 1.5, "setup_eccentricity": 20.0, "pin_circle_eccentricity": 15.0}  # µm; every other source 0
 NOISE = 2e-6  # rad (0.41″), the output encoder's noise
@@ -88,10 +90,10 @@ def test_noisy_intervals(problem, clean):
 
 def test_bad_input(clean):
     coarse = MeasuredRecord(theta=np.asarray(clean.theta)[::16], te=np.asarray(clean.te)[::16], source="coarse.csv")
-    with pytest.raises(RecordError, match=r"coarse.csv: 26 samples per input revolution, coarser than the drive's grid"):
+    with pytest.raises(RecordError, match=r"coarse\.csv: 26 samples per input revolution, coarser than the drive's grid"):
         identification_problem(CYCLOID, coarse, adjust=ADJUST)
     short = MeasuredRecord(theta=np.asarray(clean.theta)[:7], te=np.asarray(clean.te)[:7], source="short.csv")
-    with pytest.raises(RecordError, match="short.csv: the record spans"):
+    with pytest.raises(RecordError, match=r"short\.csv: the record spans"):
         identification_problem(CYCLOID, short, adjust=ADJUST)
     with pytest.raises(ValueError, match=r"adjust: name each source once.*unknown \['crank'\]"):
         identification_problem(CYCLOID, clean, adjust=["crank"])

@@ -5,6 +5,8 @@ an eccentricity as its Cartesian phasor (x, y) = e (cos φ, sin φ), µm, a sign
 each record adds its own constant (an encoder's zero is arbitrary). The residual, model TE − measured
 TE on the record's input angles, is minimised by Levenberg–Marquardt (`optimistix.least_squares`),
 differentiating through the drive's model (`AbstractSinusoidalDrive.signal`), from a few starts under `vmap`.
+A grid drive (`AbstractGridDrive`, the cycloid-pin reducer) is identified on its own grid of input angles by
+`gearte.identification.fit_grid`, with the same result (`identify(..., adjust=, start=)`).
 
 **Identifiability.** One record shows each line of the TE once: sources that act at the same
 frequency (and in the same way) add up to one phasor, and no record of this assembly can tell

@@ -252,7 +252,9 @@ def grid_problem(
 
     jac = np.asarray(_jacobian(drive, base, sources, turns, rows, jnp.asarray(origin)))  # µrad per unit of each parameter
     if not np.all(np.isfinite(jac)):
-        raise ValueError(f"identify: the model's TE is not differentiable at the start point (the Jacobian of {type(drive).__name__} is not finite)")
+        raise ValueError(
+            f"identify: the model's TE is not differentiable at the start point (the Jacobian of {type(drive).__name__} is not finite)"
+        )
     offs = np.zeros((jac.shape[0], len(recs)))
     ends = np.cumsum([0] + [len(r) for r in rows])
     for i in range(len(recs)):

@@ -122,8 +122,8 @@ def groups(instances, freqs, jac, offs, starts_of, kept, status, n_records, *, g
             "another measurement"
             if grid
             else f"{', '.join(labels)} act on the same line{'s' if len(fr) > 1 else ''} ({', '.join(map(str, fr))} × input speed): one record gives their combined phasor, reported as "
-                f"{instances[rep].label}. To separate them, turn one of {', '.join(others)} by a known angle at re-assembly and "
-                f"record again; {len(labels)} records with independent turns separate all {len(labels)} (identify(..., turns=[…]))"
+            f"{instances[rep].label}. To separate them, turn one of {', '.join(others)} by a known angle at re-assembly and "
+            f"record again; {len(labels)} records with independent turns separate all {len(labels)} (identify(..., turns=[…]))"
         )
         out.append(Group("combined", labels, instances[rep].label, fr, advice))
     if unseen:
