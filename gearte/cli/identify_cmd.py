@@ -16,7 +16,7 @@ from ..core.schema import ConfigError
 from ..core.solution import result_name
 from ..core.units import UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
-from ..identification import assemble_batch, diagnose, identification_problem, read_record, reassemble
+from ..identification import IdentificationProblem, assemble_batch, diagnose, identification_problem, read_record, reassemble
 from ..identification.fit import Z95, _solve
 from ..studies.montecarlo import as_key
 from .config import load_study
@@ -57,8 +57,9 @@ def _units(items: list[str]) -> dict[str, str]:
 def _sinusoidal(study, path) -> AbstractSinusoidalDrive:
     if not isinstance(study.drive, AbstractSinusoidalDrive):
         raise ConfigError(
-            f"{path}: [drive] type = {study.drive.type_name!r} computes its TE on a grid; identification and assembly need a drive "
-            "whose TE is a sum of sinusoids (planetary_2kh, harmonic, explicit)"
+            f"{path}: [drive] type = {study.drive.type_name!r} computes its TE on a grid; gearte identify and gearte assemble need a "
+            "drive whose TE is a sum of sinusoids (planetary_2kh, harmonic, explicit). Identify a grid drive's errors in Python: "
+            "gearte.identify(drive, gearte.read_record(path), adjust=[...]) (docs/identification.md, Grid drives)"
         )
     return study.drive
 
@@ -72,6 +73,7 @@ def run_identify(args, command: str) -> int:
     adjust = {s.strip(): None for s in args.adjust.split(",") if s.strip()}
     with atomic_output_dir(args.out, inputs=[args.config, args.record]) as tmp:
         problem = identification_problem(drive, rec)
+        assert isinstance(problem, IdentificationProblem)  # a sinusoidal drive's
         sol = _solve(problem, [np.asarray(rec.te)], as_key(args.seed))
         diag = diagnose(problem, sol, rec)
         alloc = reassemble(drive, sol, adjust=adjust, key=args.seed) if adjust else None
