@@ -101,3 +101,30 @@ def test_bad_input(clean):
         identification_problem(CYCLOID, clean, adjust=ADJUST, start={"crank": 1.0})
     with pytest.raises(ValueError, match="leave revolutions and points_per_rev out"):
         synthetic_record(CYCLOID, TRUTH, key=0, revolutions=1, points_per_rev=64)
+
+
+def test_command_line_identifies_a_grid_drive(tmp_path, clean, capsys):
+    import json
+
+    from gearte import cli
+    from gearte.identification import write_record
+
+    study = ROOT / "examples" / "cycloid_yao2001_modified.toml"
+    rec = tmp_path / "record.csv"
+    write_record(rec, clean, unit="arcsec", digits=12)
+    out = tmp_path / "id"
+    assert cli.main(["identify", str(study), str(rec), "--out", str(out), "--fit", ",".join(ADJUST)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert sorted(p.name for p in out.iterdir()) == sorted(s["files"]) == ["measured_vs_identified.png", "report.md", "summary.json"]
+    assert s["result"] == "successful" and s["grid_angles"] == 52
+    rows = {r["source"]: r for r in s["identified"]}
+    for name, value in TRUTH.items():
+        assert abs(rows[name]["value"] - value) < 1e-6, name  # µm; the record's 12 digits cost nothing here
+    assert set(s["held_at_zero"]) == set(CYCLOID.error_sources) - set(ADJUST)
+    assert [g["members"] for g in s["groups"] if g["kind"] == "unseen"] == [["setup_phase"]]
+    # re-assembly needs a sinusoidal drive; a wrong source name is refused before anything is written
+    for extra, match in ((["--adjust", "setup_phase"], "--adjust: re-assembly"), (["--fit", "moon"], "--fit: ['moon']")):
+        assert cli.main(["identify", str(study), str(rec), "--out", str(tmp_path / "o"), *extra]) == 2
+        err = capsys.readouterr().err
+        assert match in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()

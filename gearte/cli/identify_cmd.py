@@ -15,11 +15,12 @@ from .. import __version__
 from ..core.schema import ConfigError
 from ..core.solution import result_name
 from ..core.units import UNIT_SYMBOLS, angle_from_rad
-from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
+from ..drives.protocol import AbstractGridDrive, AbstractSinusoidalDrive, Eccentricity
 from ..identification import IdentificationProblem, assemble_batch, diagnose, identification_problem, read_record, reassemble
 from ..identification.fit import Z95, _solve
 from ..studies.montecarlo import as_key
 from .config import load_study
+from .identify_grid_cmd import run_identify_grid
 from .io import atomic_output_dir, write_json, written_files
 
 
@@ -35,6 +36,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--input-rpm", type=float, help="input speed, rpm (needed with a time column)")
     p.add_argument("--ratio", type=float, help="transmission ratio (default: the drive's)")
     p.add_argument("--adjust", default="", help="comma-separated sources to turn at re-assembly (any angle), e.g. sun_manufacturing")
+    p.add_argument("--fit", default="", help="grid drives: comma-separated sources to identify (default: all; the others stay at zero)")
     p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's starts")
     a = sub.add_parser("assemble", help="selective assembly of a batch of measured parts")
     a.add_argument("parts", help="CSV of parts: source,magnitude_um,phase_rad (or phase_deg), one row per part")
@@ -57,18 +59,25 @@ def _units(items: list[str]) -> dict[str, str]:
 def _sinusoidal(study, path) -> AbstractSinusoidalDrive:
     if not isinstance(study.drive, AbstractSinusoidalDrive):
         raise ConfigError(
-            f"{path}: [drive] type = {study.drive.type_name!r} computes its TE on a grid; gearte identify and gearte assemble need a "
-            "drive whose TE is a sum of sinusoids (planetary_2kh, harmonic, explicit). Identify a grid drive's errors in Python: "
-            "gearte.identify(drive, gearte.read_record(path), adjust=[...]) (docs/identification.md, Grid drives)"
+            f"{path}: [drive] type = {study.drive.type_name!r} computes its TE on a grid; gearte assemble needs a "
+            "drive whose TE is a sum of sinusoids (planetary_2kh, harmonic, explicit); gearte identify also takes a grid drive's "
+            "study (docs/identification.md, Grid drives)"
         )
     return study.drive
 
 
 def run_identify(args, command: str) -> int:
     study = load_study(args.config)
-    drive = _sinusoidal(study, args.config)
-    given = getattr(drive, "ratio", None)
+    given = getattr(study.drive, "ratio", None)
     ratio = args.ratio if args.ratio is not None else (float(given) if given is not None else None)
+    if isinstance(study.drive, AbstractGridDrive):
+        rec = read_record(args.record, units=_units(args.unit), input_rpm=args.input_rpm, ratio=ratio)
+        return run_identify_grid(args, command, study, rec)
+    if args.fit:
+        raise ValueError(
+            "--fit: only for a grid drive; a sinusoidal drive's identification fits every source (see --adjust for re-assembly)"
+        )
+    drive = _sinusoidal(study, args.config)
     rec = read_record(args.record, units=_units(args.unit), input_rpm=args.input_rpm, ratio=ratio)
     adjust = {s.strip(): None for s in args.adjust.split(",") if s.strip()}
     with atomic_output_dir(args.out, inputs=[args.config, args.record]) as tmp:
