@@ -39,7 +39,6 @@ def run_notebook(path: Path, *, ipython_dir: Path) -> int:
     config = Config()
     config.HistoryManager.enabled = False  # no history database under the user's home
     config.InteractiveShell.colors = "nocolor"
-    os.environ["IPYTHONDIR"] = str(ipython_dir)
     shell = InteractiveShell(config=config, ipython_dir=str(ipython_dir))
     shell.user_ns["__name__"] = "__main__"
     cwd = Path.cwd()

@@ -11,6 +11,7 @@ import pytest
 
 import gearte
 from gearte.cli.config import load_study
+from gearte.drives import wang2013
 from gearte.identification import RecordError, diagnose, identification_problem, identify, read_record, reassemble, synthetic_record
 from gearte.identification.fit import Z95, _solve
 from gearte.identification.records import encoder_noise, write_record
@@ -23,8 +24,7 @@ REVS, PPR = 24, 64  # the planetary hyper-period; lines up to 7/8 × input speed
 
 def planetary_errors(seed=1):
     rng = np.random.default_rng(seed)
-    tol = {"sun_manufacturing": 13, "planet_manufacturing": 16, "ring_manufacturing": 21, "sun_assembly": 12, "planet_assembly": 8}
-    tol["carrier_assembly"] = 15
+    tol = wang2013.TABLE1_TOLERANCES_UM
     return {
         n: gearte.Eccentricity(np.full(s.shape, float(tol[n])), rng.uniform(0, 2 * np.pi, s.shape))
         for n, s in PLANETARY.error_sources.items()

@@ -219,8 +219,16 @@ def estimates(y: Array, cov: Array, widths: Sequence[int]) -> tuple[Array, Array
 
 def errors_from(drive, instances: Sequence[Instance], p_full: Array, turns: Mapping[str, float]) -> dict:
     """The drive's errors from a full parameter vector (see `IdentificationProblem`)."""
-    out, j = {}, 0
-    for name, spec in drive.error_sources.items():
+    del instances  # every source of the drive, in its order
+    return unpack(drive.error_sources, drive.error_sources, p_full, turns)
+
+
+def unpack(specs: Mapping, names: Sequence[str], p_full: Array, turns: Mapping[str, float], start: Mapping | None = None) -> dict:
+    """`start` (default: none) with the sources `names` taken from `p_full` in that order: an eccentricity from its
+    Cartesian phasors (x, y) per instance, its phase turned by ``turns[name]``; a deviation from its values."""
+    out, j = dict(start or {}), 0
+    for name in names:
+        spec = specs[name]
         if spec.kind == "eccentricity":
             xs = p_full[j : j + 2 * spec.count : 2]
             ys = p_full[j + 1 : j + 2 * spec.count : 2]

@@ -33,7 +33,7 @@ from jaxtyping import Array, PRNGKeyArray
 from ..core.solution import RESULTS
 from ..core.units import TWO_PI
 from ..drives.protocol import AbstractGridDrive, Eccentricity, Errors
-from .fit import Identification, _instances, estimates
+from .fit import Identification, _instances, estimates, unpack
 from .identifiability import Group, Instance, groups, select
 from .records import MeasuredRecord, RecordError
 
@@ -164,23 +164,8 @@ class GridIdentificationProblem(eqx.Module):
 
 
 def errors_of(drive, start: Mapping, sources: Sequence[str], p_full: Array, turns: Mapping[str, float]) -> dict:
-    """`start` with the sources named in `sources` taken from `p_full` (as `gearte.identification.fit.errors_from`)."""
-    specs = drive.error_sources
-    out, j = dict(start), 0
-    for name in sources:
-        spec = specs[name]
-        if spec.kind == "eccentricity":
-            xs, ys = p_full[j : j + 2 * spec.count : 2], p_full[j + 1 : j + 2 * spec.count : 2]
-            j += 2 * spec.count
-            r2 = xs**2 + ys**2
-            ok = r2 > 0
-            mag = jnp.where(ok, jnp.sqrt(jnp.where(ok, r2, 1.0)), 0.0)
-            ph = jnp.arctan2(jnp.where(ok, ys, 0.0), jnp.where(ok, xs, 1.0)) + turns.get(name, 0.0)
-            out[name] = Eccentricity(mag.reshape(spec.shape), ph.reshape(spec.shape))
-        else:
-            out[name] = p_full[j : j + spec.count].reshape(spec.shape)
-            j += spec.count
-    return out
+    """`start` with the sources named in `sources` taken from `p_full` (`gearte.identification.fit.unpack`)."""
+    return unpack(drive.error_sources, sources, p_full, turns, start)
 
 
 def _origin(drive, start: Mapping, sources: Sequence[str]) -> np.ndarray:
