@@ -27,7 +27,7 @@ from tqdm import tqdm
 
 from ..core.metrics import AbstractMetric
 from ..core.precision import require_x64
-from ..drives.protocol import AbstractDrive
+from ..drives.protocol import AbstractDrive, AbstractSinusoidalDrive
 from .errors import ErrorModel
 
 PERCENTILES = (1.0, 5.0, 50.0, 95.0, 99.0, 99.73)
@@ -94,6 +94,20 @@ class TEStudy(eqx.Module):
             return jnp.stack([m(self.drive, r) for m in self.metric])
         return self.metric(self.drive, r)
 
+    def batch(self, keys: PRNGKeyArray) -> Float[Array, ...]:
+        """The values of the samples drawn with `keys` (leading axis), equal to ``jax.vmap(self)(keys)``.
+
+        A sinusoidal drive's responses are drawn under `vmap` and its metrics (which take any
+        batch shape) run on the whole batch at once: the exact extrema search then works on dense
+        arrays rather than through `vmap`'s batching of gathers and loops.
+        """
+        if not isinstance(self.drive, AbstractSinusoidalDrive):
+            return jax.vmap(self)(keys)
+        r = jax.vmap(self.response)(keys)
+        if isinstance(self.metric, tuple):
+            return jnp.stack([m(self.drive, r) for m in self.metric], axis=-1)
+        return self.metric(self.drive, r)
+
     def bytes_per_sample(self) -> int:
         """Rough peak working memory per sample (bytes), to size blocks."""
         return self.drive.bytes_per_sample()
@@ -108,8 +122,9 @@ def sample_keys(key: PRNGKeyArray, start, size: int) -> PRNGKeyArray:
 @eqx.filter_jit
 def _run_block(fn, key, start, block: int):
     """Samples ``start … start + block − 1``, vectorised: the one compiled program of a study."""
-    idx = start + jnp.arange(block, dtype=jnp.uint32)
-    return jax.vmap(fn)(jax.vmap(lambda i: jax.random.fold_in(key, i))(idx))
+    keys = sample_keys(key, start, block)
+    batch = getattr(fn, "batch", None)
+    return batch(keys) if callable(batch) else jax.vmap(fn)(keys)
 
 
 def default_block_size(bytes_per_sample: int, *, budget_bytes: int = 128 * 2**20) -> int:
