@@ -417,6 +417,13 @@ class DesignRun(eqx.Module):
 _TRACE_ERRORS = (jax.errors.JAXTypeError, jax.errors.JAXIndexError)
 
 
+@eqx.filter_jit
+def _vmapped(fn, x, args):
+    # One compiled program per function, number of runs and `args` structure: a second design of the same
+    # size reuses it (Python numbers in `args` are compile-time constants; pass arrays to vary them).
+    return jax.vmap(fn, in_axes=(0, None))(x, args)
+
+
 def run_design(
     fn: Callable[[Any, Any], Any],
     design: AbstractDesign,
@@ -435,7 +442,8 @@ def run_design(
       variables' natural units: any gearte drive and metric (see docs/doe.md).
     - `design`: a design (`CentralComposite()`, `BoxBehnken()`, …).
     - `variables`: one `Variable` per entry of x.
-    - `args`: passed to `fn` unchanged.
+    - `args`: passed to `fn` unchanged (a pytree; under `vmap` its arrays are traced and its Python numbers
+      are constants, so pass arrays for values that change between calls).
     - `vectorise`: True: all runs in one `jax.vmap`ped, jitted call (`fn` must be a JAX function);
       False: a Python loop with a progress bar; None (default): vmap, falling back to the loop when `fn`
       cannot be traced (it converts a tracer to NumPy or branches on a value).
@@ -456,7 +464,7 @@ def run_design(
     out = None
     if vectorise is not False:
         try:
-            out = np.asarray(eqx.filter_jit(jax.vmap(fn, in_axes=(0, None)))(jnp.asarray(natural), args))
+            out = np.asarray(_vmapped(fn, jnp.asarray(natural), args))
         except _TRACE_ERRORS:
             if vectorise:
                 raise
