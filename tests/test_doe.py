@@ -353,7 +353,7 @@ def test_run_design_vmaps_a_jax_function_and_loops_otherwise():
     assert a.responses.shape == (9, 2)
     np.testing.assert_allclose(a.responses, b.responses, rtol=1e-14)
     np.testing.assert_allclose(a.natural[:, 0], np.repeat([0.0, 1.0, 2.0], 3))
-    with pytest.raises(jax.errors.TracerArrayConversionError):
+    with pytest.raises(jax.errors.ConcretizationTypeError):
         gearte.run_design(nfn, gearte.FullFactorial(3), vs, 2.0, vectorise=True)
 
 
