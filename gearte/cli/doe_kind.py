@@ -37,7 +37,7 @@ from ..studies.doe import (
 )
 from ..studies.errors import ErrorSource
 from ..studies.laws import Fixed
-from ..studies.montecarlo import TEStudy, monte_carlo
+from ..studies.montecarlo import TEStudy, default_block_size, monte_carlo
 from ..studies.response_surface import ResponseSurface, fit_response_surface
 from .kind_base import AbstractStudyKind, KindOutcome
 
@@ -243,7 +243,9 @@ class Doe(AbstractStudyKind):
                 src = study.errors.sources[v.source]
                 sources[v.source] = ErrorSource(Fixed(float(xi) * v.to_model), src.phase)
             fn = TEStudy(study.drive, study.errors.replace(**sources), metric=spec.metric)
-            values = monte_carlo(fn, key=study.seed, n_samples=spec.samples, chunk_size=study.chunk_size, progress=False).values
+            # Blocks no larger than a run: a small Monte Carlo per run computes no samples it drops.
+            block = min(default_block_size(fn.bytes_per_sample()), spec.samples)
+            values = monte_carlo(fn, key=study.seed, n_samples=spec.samples, block_size=block, progress=False).values
             values = np.asarray(angle_from_rad(values, study.unit) if spec.metric.quantity == "angle" else values)
             return statistic(values, spec.statistic)
 

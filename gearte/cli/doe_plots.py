@@ -2,7 +2,7 @@
 
 Each function draws on its own `matplotlib.figure.Figure` and saves it to `path`, like `gearte.cli.plots`;
 `gearte run` calls them for a ``[doe]`` study, and they take plain arrays, so they serve a Python session too:
-``residuals(s.y, s.fitted, s.residuals, unit="arcsec", path="res.png")`` for a `gearte.ResponseSurface` s.
+``residuals(s.y, s.fitted, s.residuals, unit="arcsec", path=PATH)`` for a `gearte.ResponseSurface` s.
 """
 
 from __future__ import annotations
