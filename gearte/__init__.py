@@ -128,6 +128,21 @@ from .standards.iso1328 import (
     nearest_grade as nearest_grade,
     round_tolerance as round_tolerance,
 )
+from .studies.doe import (
+    AbstractCCDKind as AbstractCCDKind,
+    AbstractDesign as AbstractDesign,
+    BoxBehnken as BoxBehnken,
+    CentralComposite as CentralComposite,
+    Circumscribed as Circumscribed,
+    DesignRun as DesignRun,
+    FaceCentred as FaceCentred,
+    FullFactorial as FullFactorial,
+    Inscribed as Inscribed,
+    LatinHypercube as LatinHypercube,
+    SobolSequence as SobolSequence,
+    Variable as Variable,
+    run_design as run_design,
+)
 from .studies.errors import ErrorModel as ErrorModel, ErrorSource as ErrorSource
 from .studies.laws import (
     AbstractLaw as AbstractLaw,
@@ -152,6 +167,12 @@ from .studies.montecarlo import (
     monte_carlo as monte_carlo,
     sample_keys as sample_keys,
     statistics as statistics,
+)
+from .studies.response_surface import (
+    CanonicalAnalysis as CanonicalAnalysis,
+    ResponseSurface as ResponseSurface,
+    SurfaceOptimum as SurfaceOptimum,
+    fit_response_surface as fit_response_surface,
 )
 from .studies.sensitivity import SobolIndices as SobolIndices, sobol_indices as sobol_indices
 from .studies.sensitivity_pathwise import (

@@ -17,7 +17,7 @@ from gearte.cli.config import ConfigError, load_study, parse_angle
 
 ROOT = Path(__file__).resolve().parents[1]
 # Plain Monte Carlo studies; allocation and budget studies have their own tests (test_allocation, test_budget).
-EXAMPLES = sorted(p for p in (ROOT / "examples").glob("planetary_*.toml") if not p.stem.endswith(("_allocate", "_budget")))
+EXAMPLES = sorted(p for p in (ROOT / "examples").glob("planetary_*.toml") if not p.stem.endswith(("_allocate", "_budget", "_doe")))
 RANDOM = ROOT / "examples" / "planetary_wang2013_random.toml"
 
 
