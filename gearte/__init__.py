@@ -3,160 +3,463 @@
 Importing gearte changes no global state. gearte needs JAX's 64-bit mode: call
 ``jax.config.update("jax_enable_x64", True)`` (or `gearte.enable_x64()`) once, before
 building arrays; the `gearte` command does it itself.
+
+Importing gearte is quick and imports neither JAX nor matplotlib: each name below is loaded from its
+module the first time it is used (`gearte.Planetary2KH` imports the drives, and JAX with them).
 """
 
-from . import drives as drives
-from . import units as units
-from .core.extrema import (
-    Extrema as Extrema,
-    Spectrum as Spectrum,
-    extrema as extrema,
-    peak as peak,
-    peak_to_peak as peak_to_peak,
-    rms as rms,
-    smooth_peak as smooth_peak,
-    spectrum as spectrum,
-)
-from .core.metrics import AbstractMetric as AbstractMetric, Peak as Peak, PeakToPeak as PeakToPeak, RMS as RMS
-from .core.cache import default_cache_dir as default_cache_dir, enable_compilation_cache as enable_compilation_cache
-from .core.precision import enable_x64 as enable_x64, require_x64 as require_x64, x64_enabled as x64_enabled
-from .core.records import (
-    Record as Record,
-    RecordSpectrum as RecordSpectrum,
-    SpectralLines as SpectralLines,
-    band_envelope as band_envelope,
-    record as record,
-    record_envelope as record_envelope,
-    record_spectrum as record_spectrum,
-    spectral_lines as spectral_lines,
-)
-from .core.schema import ConfigError as ConfigError
-from .core.signal import (
-    Components as Components,
-    TESignal as TESignal,
-    as_frequency as as_frequency,
-    evaluate as evaluate,
-    to_signal as to_signal,
-)
-from .core.solution import RESULTS as RESULTS, result_name as result_name
-from .core.twoscale import TwoScaleExtrema as TwoScaleExtrema, extrema_two_scale as extrema_two_scale
-from .drives import (
-    CycloidAnalysis as CycloidAnalysis,
-    CycloidErrors as CycloidErrors,
-    CycloidModification as CycloidModification,
-    CycloidPin as CycloidPin,
-    LoadedPairs as LoadedPairs,
-    LoadedPairsMin as LoadedPairsMin,
-    LostMotion as LostMotion,
-    LostMotionMin as LostMotionMin,
-    RotationErrorPeakToPeak as RotationErrorPeakToPeak,
-)
-from .drives import (
-    AbstractDrive as AbstractDrive,
-    AbstractGridDrive as AbstractGridDrive,
-    AbstractSinusoidalDrive as AbstractSinusoidalDrive,
-    Eccentricity as Eccentricity,
-    ExplicitDrive as ExplicitDrive,
-    ExplicitTerm as ExplicitTerm,
-    HarmonicDrive as HarmonicDrive,
-    HarmonicSource as HarmonicSource,
-    Planetary2KH as Planetary2KH,
-    SourceSpec as SourceSpec,
-)
-from .identification import (
-    BatchAssembly as BatchAssembly,
-    Diagnosis as Diagnosis,
-    Identification as Identification,
-    IdentificationProblem as IdentificationProblem,
-    MeasuredRecord as MeasuredRecord,
-    RecordError as RecordError,
-    assemble_batch as assemble_batch,
-    diagnose as diagnose,
-    identification_problem as identification_problem,
-    identify as identify,
-    read_record as read_record,
-    reassemble as reassemble,
-    synthetic_record as synthetic_record,
-    write_record as write_record,
-)
-from .optimise.allocation import (
-    RuleAllocation as RuleAllocation,
-    RuleProblem as RuleProblem,
-    allocate_rule as allocate_rule,
-    evaluate_rule as evaluate_rule,
-    expected as expected,
-    rule_problem as rule_problem,
-    worst_case as worst_case,
-)
-from .optimise.allocation_measured import MeasuredAllocation as MeasuredAllocation, allocate_measured as allocate_measured
-from .optimise.budget import (
-    BudgetProblem as BudgetProblem,
-    BudgetResult as BudgetResult,
-    Constraint as Constraint,
-    budget_problem as budget_problem,
-    contributions as contributions,
-    optimise_budget as optimise_budget,
-    pareto_front as pareto_front,
-    uniform_scaling as uniform_scaling,
-)
-from .optimise.statistics import (
-    AbstractStatistic as AbstractStatistic,
-    MeanKSigma as MeanKSigma,
-    Yield as Yield,
-    smooth_quantile as smooth_quantile,
-)
-from .optimise.costs import (
-    AbstractCostModel as AbstractCostModel,
-    Exponential as Exponential,
-    GradeTable as GradeTable,
-    Power as Power,
-    Reciprocal as Reciprocal,
-    ReciprocalSquare as ReciprocalSquare,
-)
-from .optimise.modification import (
-    ModificationSolution as ModificationSolution,
-    ModificationSpec as ModificationSpec,
-    optimise_modification as optimise_modification,
-)
-from .optimise.sensitivity_table import SensitivityTable as SensitivityTable, sensitivity_table as sensitivity_table
-from .standards.iso1328 import (
-    eccentricity_from_runout as eccentricity_from_runout,
-    grade_for_tolerance as grade_for_tolerance,
-    grade_range as grade_range,
-    iso1328_tolerance as iso1328_tolerance,
-    iso1328_tolerances as iso1328_tolerances,
-    nearest_grade as nearest_grade,
-    round_tolerance as round_tolerance,
-)
-from .studies.errors import ErrorModel as ErrorModel, ErrorSource as ErrorSource
-from .studies.laws import (
-    AbstractLaw as AbstractLaw,
-    AbstractPhase as AbstractPhase,
-    AbstractValueLaw as AbstractValueLaw,
-    Fixed as Fixed,
-    FixedPhase as FixedPhase,
-    Normal as Normal,
-    Optimised as Optimised,
-    Rayleigh as Rayleigh,
-    RelativePhase as RelativePhase,
-    Sinusoid as Sinusoid,
-    TruncatedNormal as TruncatedNormal,
-    Uniform as Uniform,
-    UniformPhase as UniformPhase,
-)
-from .studies.montecarlo import (
-    MonteCarloResult as MonteCarloResult,
-    Statistics as Statistics,
-    TEStudy as TEStudy,
-    as_key as as_key,
-    monte_carlo as monte_carlo,
-    sample_keys as sample_keys,
-    statistics as statistics,
-)
-from .studies.sensitivity import SobolIndices as SobolIndices, sobol_indices as sobol_indices
-from .studies.sensitivity_pathwise import (
-    PathwiseSensitivity as PathwiseSensitivity,
-    pathwise_sensitivities as pathwise_sensitivities,
-)
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from . import drives as drives
+    from . import units as units
+    from .core.extrema import (
+        Extrema as Extrema,
+        Spectrum as Spectrum,
+        extrema as extrema,
+        peak as peak,
+        peak_to_peak as peak_to_peak,
+        rms as rms,
+        smooth_peak as smooth_peak,
+        spectrum as spectrum,
+    )
+    from .core.metrics import AbstractMetric as AbstractMetric, Peak as Peak, PeakToPeak as PeakToPeak, RMS as RMS
+    from .core.cache import default_cache_dir as default_cache_dir, enable_compilation_cache as enable_compilation_cache
+    from .core.precision import enable_x64 as enable_x64, require_x64 as require_x64, x64_enabled as x64_enabled
+    from .core.records import (
+        Record as Record,
+        RecordSpectrum as RecordSpectrum,
+        SpectralLines as SpectralLines,
+        band_envelope as band_envelope,
+        record as record,
+        record_envelope as record_envelope,
+        record_spectrum as record_spectrum,
+        spectral_lines as spectral_lines,
+    )
+    from .core.schema import ConfigError as ConfigError
+    from .core.signal import (
+        Components as Components,
+        TESignal as TESignal,
+        as_frequency as as_frequency,
+        evaluate as evaluate,
+        to_signal as to_signal,
+    )
+    from .core.solution import RESULTS as RESULTS, result_name as result_name
+    from .core.twoscale import TwoScaleExtrema as TwoScaleExtrema, extrema_two_scale as extrema_two_scale
+    from .drives import (
+        CycloidAnalysis as CycloidAnalysis,
+        CycloidErrors as CycloidErrors,
+        CycloidModification as CycloidModification,
+        CycloidPin as CycloidPin,
+        LoadedPairs as LoadedPairs,
+        LoadedPairsMin as LoadedPairsMin,
+        LostMotion as LostMotion,
+        LostMotionMin as LostMotionMin,
+        RotationErrorPeakToPeak as RotationErrorPeakToPeak,
+    )
+    from .drives import (
+        AbstractDrive as AbstractDrive,
+        AbstractGridDrive as AbstractGridDrive,
+        AbstractSinusoidalDrive as AbstractSinusoidalDrive,
+        Eccentricity as Eccentricity,
+        ExplicitDrive as ExplicitDrive,
+        ExplicitTerm as ExplicitTerm,
+        HarmonicDrive as HarmonicDrive,
+        HarmonicSource as HarmonicSource,
+        Planetary2KH as Planetary2KH,
+        SourceSpec as SourceSpec,
+    )
+    from .identification import (
+        BatchAssembly as BatchAssembly,
+        Diagnosis as Diagnosis,
+        Identification as Identification,
+        IdentificationProblem as IdentificationProblem,
+        MeasuredRecord as MeasuredRecord,
+        RecordError as RecordError,
+        assemble_batch as assemble_batch,
+        diagnose as diagnose,
+        identification_problem as identification_problem,
+        identify as identify,
+        read_record as read_record,
+        reassemble as reassemble,
+        synthetic_record as synthetic_record,
+        write_record as write_record,
+    )
+    from .optimise.allocation import (
+        RuleAllocation as RuleAllocation,
+        RuleProblem as RuleProblem,
+        allocate_rule as allocate_rule,
+        evaluate_rule as evaluate_rule,
+        expected as expected,
+        rule_problem as rule_problem,
+        worst_case as worst_case,
+    )
+    from .optimise.allocation_measured import MeasuredAllocation as MeasuredAllocation, allocate_measured as allocate_measured
+    from .optimise.budget import (
+        BudgetProblem as BudgetProblem,
+        BudgetResult as BudgetResult,
+        Constraint as Constraint,
+        budget_problem as budget_problem,
+        contributions as contributions,
+        optimise_budget as optimise_budget,
+        pareto_front as pareto_front,
+        uniform_scaling as uniform_scaling,
+    )
+    from .optimise.statistics import (
+        AbstractStatistic as AbstractStatistic,
+        MeanKSigma as MeanKSigma,
+        Yield as Yield,
+        smooth_quantile as smooth_quantile,
+    )
+    from .optimise.costs import (
+        AbstractCostModel as AbstractCostModel,
+        Exponential as Exponential,
+        GradeTable as GradeTable,
+        Power as Power,
+        Reciprocal as Reciprocal,
+        ReciprocalSquare as ReciprocalSquare,
+    )
+    from .optimise.modification import (
+        ModificationSolution as ModificationSolution,
+        ModificationSpec as ModificationSpec,
+        optimise_modification as optimise_modification,
+    )
+    from .optimise.sensitivity_table import SensitivityTable as SensitivityTable, sensitivity_table as sensitivity_table
+    from .standards.iso1328 import (
+        eccentricity_from_runout as eccentricity_from_runout,
+        grade_for_tolerance as grade_for_tolerance,
+        grade_range as grade_range,
+        iso1328_tolerance as iso1328_tolerance,
+        iso1328_tolerances as iso1328_tolerances,
+        nearest_grade as nearest_grade,
+        round_tolerance as round_tolerance,
+    )
+    from .studies.errors import ErrorModel as ErrorModel, ErrorSource as ErrorSource
+    from .studies.laws import (
+        AbstractLaw as AbstractLaw,
+        AbstractPhase as AbstractPhase,
+        AbstractValueLaw as AbstractValueLaw,
+        Fixed as Fixed,
+        FixedPhase as FixedPhase,
+        Normal as Normal,
+        Optimised as Optimised,
+        Rayleigh as Rayleigh,
+        RelativePhase as RelativePhase,
+        Sinusoid as Sinusoid,
+        TruncatedNormal as TruncatedNormal,
+        Uniform as Uniform,
+        UniformPhase as UniformPhase,
+    )
+    from .studies.montecarlo import (
+        MonteCarloResult as MonteCarloResult,
+        Statistics as Statistics,
+        TEStudy as TEStudy,
+        as_key as as_key,
+        monte_carlo as monte_carlo,
+        sample_keys as sample_keys,
+        statistics as statistics,
+    )
+    from .studies.sensitivity import SobolIndices as SobolIndices, sobol_indices as sobol_indices
+    from .studies.sensitivity_pathwise import (
+        PathwiseSensitivity as PathwiseSensitivity,
+        pathwise_sensitivities as pathwise_sensitivities,
+    )
 
 __version__ = "0.2.0"
+
+#: Submodules reachable as attributes (`gearte.drives`, `gearte.cli`, …).
+_SUBMODULES = frozenset({"cli", "core", "drives", "identification", "optimise", "standards", "studies", "units"})
+
+#: Each public name → the module it is loaded from (relative to gearte).
+_LAZY: dict[str, str] = {
+    "Extrema": ".core.extrema",
+    "Spectrum": ".core.extrema",
+    "extrema": ".core.extrema",
+    "peak": ".core.extrema",
+    "peak_to_peak": ".core.extrema",
+    "rms": ".core.extrema",
+    "smooth_peak": ".core.extrema",
+    "spectrum": ".core.extrema",
+    "AbstractMetric": ".core.metrics",
+    "Peak": ".core.metrics",
+    "PeakToPeak": ".core.metrics",
+    "RMS": ".core.metrics",
+    "default_cache_dir": ".core.cache",
+    "enable_compilation_cache": ".core.cache",
+    "enable_x64": ".core.precision",
+    "require_x64": ".core.precision",
+    "x64_enabled": ".core.precision",
+    "Record": ".core.records",
+    "RecordSpectrum": ".core.records",
+    "SpectralLines": ".core.records",
+    "band_envelope": ".core.records",
+    "record": ".core.records",
+    "record_envelope": ".core.records",
+    "record_spectrum": ".core.records",
+    "spectral_lines": ".core.records",
+    "ConfigError": ".core.schema",
+    "Components": ".core.signal",
+    "TESignal": ".core.signal",
+    "as_frequency": ".core.signal",
+    "evaluate": ".core.signal",
+    "to_signal": ".core.signal",
+    "RESULTS": ".core.solution",
+    "result_name": ".core.solution",
+    "TwoScaleExtrema": ".core.twoscale",
+    "extrema_two_scale": ".core.twoscale",
+    "CycloidAnalysis": ".drives",
+    "CycloidErrors": ".drives",
+    "CycloidModification": ".drives",
+    "CycloidPin": ".drives",
+    "LoadedPairs": ".drives",
+    "LoadedPairsMin": ".drives",
+    "LostMotion": ".drives",
+    "LostMotionMin": ".drives",
+    "RotationErrorPeakToPeak": ".drives",
+    "AbstractDrive": ".drives",
+    "AbstractGridDrive": ".drives",
+    "AbstractSinusoidalDrive": ".drives",
+    "Eccentricity": ".drives",
+    "ExplicitDrive": ".drives",
+    "ExplicitTerm": ".drives",
+    "HarmonicDrive": ".drives",
+    "HarmonicSource": ".drives",
+    "Planetary2KH": ".drives",
+    "SourceSpec": ".drives",
+    "BatchAssembly": ".identification",
+    "Diagnosis": ".identification",
+    "Identification": ".identification",
+    "IdentificationProblem": ".identification",
+    "MeasuredRecord": ".identification",
+    "RecordError": ".identification",
+    "assemble_batch": ".identification",
+    "diagnose": ".identification",
+    "identification_problem": ".identification",
+    "identify": ".identification",
+    "read_record": ".identification",
+    "reassemble": ".identification",
+    "synthetic_record": ".identification",
+    "write_record": ".identification",
+    "RuleAllocation": ".optimise.allocation",
+    "RuleProblem": ".optimise.allocation",
+    "allocate_rule": ".optimise.allocation",
+    "evaluate_rule": ".optimise.allocation",
+    "expected": ".optimise.allocation",
+    "rule_problem": ".optimise.allocation",
+    "worst_case": ".optimise.allocation",
+    "MeasuredAllocation": ".optimise.allocation_measured",
+    "allocate_measured": ".optimise.allocation_measured",
+    "BudgetProblem": ".optimise.budget",
+    "BudgetResult": ".optimise.budget",
+    "Constraint": ".optimise.budget",
+    "budget_problem": ".optimise.budget",
+    "contributions": ".optimise.budget",
+    "optimise_budget": ".optimise.budget",
+    "pareto_front": ".optimise.budget",
+    "uniform_scaling": ".optimise.budget",
+    "AbstractStatistic": ".optimise.statistics",
+    "MeanKSigma": ".optimise.statistics",
+    "Yield": ".optimise.statistics",
+    "smooth_quantile": ".optimise.statistics",
+    "AbstractCostModel": ".optimise.costs",
+    "Exponential": ".optimise.costs",
+    "GradeTable": ".optimise.costs",
+    "Power": ".optimise.costs",
+    "Reciprocal": ".optimise.costs",
+    "ReciprocalSquare": ".optimise.costs",
+    "ModificationSolution": ".optimise.modification",
+    "ModificationSpec": ".optimise.modification",
+    "optimise_modification": ".optimise.modification",
+    "SensitivityTable": ".optimise.sensitivity_table",
+    "sensitivity_table": ".optimise.sensitivity_table",
+    "eccentricity_from_runout": ".standards.iso1328",
+    "grade_for_tolerance": ".standards.iso1328",
+    "grade_range": ".standards.iso1328",
+    "iso1328_tolerance": ".standards.iso1328",
+    "iso1328_tolerances": ".standards.iso1328",
+    "nearest_grade": ".standards.iso1328",
+    "round_tolerance": ".standards.iso1328",
+    "ErrorModel": ".studies.errors",
+    "ErrorSource": ".studies.errors",
+    "AbstractLaw": ".studies.laws",
+    "AbstractPhase": ".studies.laws",
+    "AbstractValueLaw": ".studies.laws",
+    "Fixed": ".studies.laws",
+    "FixedPhase": ".studies.laws",
+    "Normal": ".studies.laws",
+    "Optimised": ".studies.laws",
+    "Rayleigh": ".studies.laws",
+    "RelativePhase": ".studies.laws",
+    "Sinusoid": ".studies.laws",
+    "TruncatedNormal": ".studies.laws",
+    "Uniform": ".studies.laws",
+    "UniformPhase": ".studies.laws",
+    "MonteCarloResult": ".studies.montecarlo",
+    "Statistics": ".studies.montecarlo",
+    "TEStudy": ".studies.montecarlo",
+    "as_key": ".studies.montecarlo",
+    "monte_carlo": ".studies.montecarlo",
+    "sample_keys": ".studies.montecarlo",
+    "statistics": ".studies.montecarlo",
+    "SobolIndices": ".studies.sensitivity",
+    "sobol_indices": ".studies.sensitivity",
+    "PathwiseSensitivity": ".studies.sensitivity_pathwise",
+    "pathwise_sensitivities": ".studies.sensitivity_pathwise",
+}
+
+__all__ = [
+    "RESULTS",
+    "RMS",
+    "AbstractCostModel",
+    "AbstractDrive",
+    "AbstractGridDrive",
+    "AbstractLaw",
+    "AbstractMetric",
+    "AbstractPhase",
+    "AbstractSinusoidalDrive",
+    "AbstractStatistic",
+    "AbstractValueLaw",
+    "BatchAssembly",
+    "BudgetProblem",
+    "BudgetResult",
+    "Components",
+    "ConfigError",
+    "Constraint",
+    "CycloidAnalysis",
+    "CycloidErrors",
+    "CycloidModification",
+    "CycloidPin",
+    "Diagnosis",
+    "Eccentricity",
+    "ErrorModel",
+    "ErrorSource",
+    "ExplicitDrive",
+    "ExplicitTerm",
+    "Exponential",
+    "Extrema",
+    "Fixed",
+    "FixedPhase",
+    "GradeTable",
+    "HarmonicDrive",
+    "HarmonicSource",
+    "Identification",
+    "IdentificationProblem",
+    "LoadedPairs",
+    "LoadedPairsMin",
+    "LostMotion",
+    "LostMotionMin",
+    "MeanKSigma",
+    "MeasuredAllocation",
+    "MeasuredRecord",
+    "ModificationSolution",
+    "ModificationSpec",
+    "MonteCarloResult",
+    "Normal",
+    "Optimised",
+    "PathwiseSensitivity",
+    "Peak",
+    "PeakToPeak",
+    "Planetary2KH",
+    "Power",
+    "Rayleigh",
+    "Reciprocal",
+    "ReciprocalSquare",
+    "Record",
+    "RecordError",
+    "RecordSpectrum",
+    "RelativePhase",
+    "RotationErrorPeakToPeak",
+    "RuleAllocation",
+    "RuleProblem",
+    "SensitivityTable",
+    "Sinusoid",
+    "SobolIndices",
+    "SourceSpec",
+    "SpectralLines",
+    "Spectrum",
+    "Statistics",
+    "TESignal",
+    "TEStudy",
+    "TruncatedNormal",
+    "TwoScaleExtrema",
+    "Uniform",
+    "UniformPhase",
+    "Yield",
+    "__version__",
+    "allocate_measured",
+    "allocate_rule",
+    "as_frequency",
+    "as_key",
+    "assemble_batch",
+    "band_envelope",
+    "budget_problem",
+    "contributions",
+    "default_cache_dir",
+    "diagnose",
+    "drives",
+    "eccentricity_from_runout",
+    "enable_compilation_cache",
+    "enable_x64",
+    "evaluate",
+    "evaluate_rule",
+    "expected",
+    "extrema",
+    "extrema_two_scale",
+    "grade_for_tolerance",
+    "grade_range",
+    "identification_problem",
+    "identify",
+    "iso1328_tolerance",
+    "iso1328_tolerances",
+    "monte_carlo",
+    "nearest_grade",
+    "optimise_budget",
+    "optimise_modification",
+    "pareto_front",
+    "pathwise_sensitivities",
+    "peak",
+    "peak_to_peak",
+    "read_record",
+    "reassemble",
+    "record",
+    "record_envelope",
+    "record_spectrum",
+    "require_x64",
+    "result_name",
+    "rms",
+    "round_tolerance",
+    "rule_problem",
+    "sample_keys",
+    "sensitivity_table",
+    "smooth_peak",
+    "smooth_quantile",
+    "sobol_indices",
+    "spectral_lines",
+    "spectrum",
+    "statistics",
+    "synthetic_record",
+    "to_signal",
+    "uniform_scaling",
+    "units",
+    "worst_case",
+    "write_record",
+    "x64_enabled",
+]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+    elif name in _SUBMODULES:
+        value = importlib.import_module(f".{name}", __name__)
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value  # the next access is a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__, *_SUBMODULES})
