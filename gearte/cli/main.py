@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 from .. import __version__
 from ..core.cache import cache_wanted, enable_compilation_cache
 from ..core.schema import ConfigError
-from .io import OutputError, check_output, interrupt_received, reset_interrupts, sigterm_as_interrupt
+from .io import OutputError, check_output, deferred_interrupts, interrupt_received, reset_interrupts, sigterm_as_interrupt
 
 if TYPE_CHECKING:
     from .config import Study
@@ -46,9 +46,16 @@ _LAZY = {
 def __getattr__(name: str) -> Any:
     if name not in _LAZY:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_LAZY[name], __package__), name)
+    value = getattr(_import(_LAZY[name]), name)
     globals()[name] = value
     return value
+
+
+def _import(module: str):
+    """Import a module of gearte (relative to this one). An interrupt meanwhile is remembered, and raised once the
+    import is complete: raised inside an extension's initialisation it would come out as another error, or worse."""
+    with deferred_interrupts():
+        return importlib.import_module(module, __package__)
 
 
 def _lazy(name: str) -> Any:
@@ -232,8 +239,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def _setup_jax(args) -> None:
     """What a computing command sets up first: float64, and the persistent compilation cache."""
-    from ..core.precision import enable_x64
-
+    enable_x64 = _import("..core.precision").enable_x64
+    if args.command != "grade":
+        for module in ("..drives.registry", "..studies.montecarlo", ".kinds"):  # what building a study imports
+            _import(module)
     # gearte's geometry needs float64; the command line turns it on before any array exists.
     enable_x64()
     if args.command != "grade" and getattr(args, "compile_cache", True) and cache_wanted():
@@ -278,8 +287,7 @@ def _main(argv: list[str] | None) -> int:
         )
         return 0
     if args.command in ("identify", "assemble"):
-        from . import identify_cmd
-
+        identify_cmd = _import(".identify_cmd")
         command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
         return (identify_cmd.run_identify if args.command == "identify" else identify_cmd.run_assemble)(args, command)
     if args.command == "compare":
