@@ -24,28 +24,6 @@ from .identify_grid_cmd import run_identify_grid
 from .io import atomic_output_dir, write_json, written_files
 
 
-def add_parsers(sub) -> None:
-    """Register `identify` and `assemble` on the command line's sub-parsers."""
-    p = sub.add_parser("identify", help="identify a drive's errors from a measured TE record (CSV or NPZ)")
-    p.add_argument("config", help="study file (TOML) of the drive")
-    p.add_argument("record", help="measured record: CSV or NPZ (see docs/identification.md)")
-    p.add_argument("--out", required=True, help="results folder (new, empty, or an earlier gearte result)")
-    p.add_argument(
-        "--unit", action="append", default=[], metavar="QUANTITY=UNIT", help="unit of a column named without one, e.g. te=arcsec"
-    )
-    p.add_argument("--input-rpm", type=float, help="input speed, rpm (needed with a time column)")
-    p.add_argument("--ratio", type=float, help="transmission ratio (default: the drive's)")
-    p.add_argument("--adjust", default="", help="comma-separated sources to turn at re-assembly (any angle), e.g. sun_manufacturing")
-    p.add_argument("--fit", default="", help="grid drives: comma-separated sources to identify (default: all; the others stay at zero)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's starts")
-    a = sub.add_parser("assemble", help="selective assembly of a batch of measured parts")
-    a.add_argument("parts", help="CSV of parts: source,magnitude_um,phase_rad (or phase_deg), one row per part")
-    a.add_argument("--study", required=True, help="study file (TOML) of the drive")
-    a.add_argument("--out", required=True, help="results folder (new, empty, or an earlier gearte result)")
-    a.add_argument("--seed", type=int, default=0, help="seed of the random start and of the random assemblies")
-    a.add_argument("--random-batches", type=int, default=100, help="random assemblies of the same parts for the comparison")
-
-
 def _units(items: list[str]) -> dict[str, str]:
     out = {}
     for it in items:

@@ -12,22 +12,55 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import json
 import shlex
 import signal
 import sys
 import warnings
+from typing import TYPE_CHECKING, Any
 
 from .. import __version__
 from ..core.cache import cache_wanted, enable_compilation_cache
-from ..core.precision import enable_x64
 from ..core.schema import ConfigError
-from ..standards.iso1328 import iso1328_tolerances
-from .compare import compare_runs
-from .config import Study, load_study
-from .identify_cmd import add_parsers as _identify_parsers
-from .io import OutputError, check_output, interrupt_received, reset_interrupts, sigterm_as_interrupt
-from .run import CONFIRM_BYTES, CONFIRM_SECONDS, estimate_cost, run_study
+from .io import OutputError, check_output, deferred_interrupts, interrupt_received, reset_interrupts, sigterm_as_interrupt
+
+if TYPE_CHECKING:
+    from .config import Study
+
+# The parser and the file's first checks import neither JAX nor matplotlib: `gearte --help` and a
+# `gearte check` of a broken file answer at once. The modules that compute are imported by the
+# commands that need them (and are reachable here as attributes, e.g. `main.run_study`).
+_LAZY = {
+    "CONFIRM_BYTES": ".run",
+    "CONFIRM_SECONDS": ".run",
+    "estimate_cost": ".run",
+    "run_study": ".run",
+    "compare_runs": ".compare",
+    "load_study": ".config",
+    "check_file": ".config",
+    "iso1328_tolerances": "..standards.iso1328",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(_import(_LAZY[name]), name)
+    globals()[name] = value
+    return value
+
+
+def _import(module: str):
+    """Import a module of gearte (relative to this one). An interrupt meanwhile is remembered, and raised once the
+    import is complete: raised inside an extension's initialisation it would come out as another error, or worse."""
+    with deferred_interrupts():
+        return importlib.import_module(module, __package__)
+
+
+def _lazy(name: str) -> Any:
+    """`name` of this module: what a test put there, else the lazily imported one."""
+    return globals()[name] if name in globals() else __getattr__(name)
 
 
 def _positive_int(text: str) -> int:
@@ -57,7 +90,7 @@ def _overrides(p: argparse.ArgumentParser) -> None:
 
 
 def _study(args) -> Study:
-    study = load_study(args.config, samples=args.samples, seed=args.seed)
+    study = _lazy("load_study")(args.config, samples=args.samples, seed=args.seed)
     if args.chunk_size is not None:
         study = dataclasses.replace(study, chunk_size=args.chunk_size)
     return study
@@ -83,7 +116,7 @@ def _duration(s: float) -> str:
 
 def _confirm(args, study: Study) -> None:
     """Estimate a large run before starting it; refuse one above the thresholds without --yes."""
-    cost = estimate_cost(study)
+    cost = _lazy("estimate_cost")(study)
     if cost.seconds is None:
         return
     where = f"--samples {study.samples:,}" if args.samples is not None else f"{args.config}: [study] samples = {study.samples:,}"
@@ -91,7 +124,7 @@ def _confirm(args, study: Study) -> None:
         f"about {_duration(cost.seconds)} of Monte Carlo at {cost.rate:,.0f} samples/s on this machine (study kinds not "
         f"included), and {_size(cost.bytes)} of per-sample results held in memory and written to samples.npz"
     )
-    if cost.seconds > CONFIRM_SECONDS or cost.bytes > CONFIRM_BYTES:
+    if cost.seconds > _lazy("CONFIRM_SECONDS") or cost.bytes > _lazy("CONFIRM_BYTES"):
         if not args.yes:
             raise OutputError(f"{where}: {what}; add --yes to run it anyway, or give fewer samples")
     print(f"gearte: {where}: {what}", file=sys.stderr)
@@ -142,6 +175,28 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _identify_parsers(sub) -> None:
+    """Register `identify` and `assemble` on the command line's sub-parsers."""
+    p = sub.add_parser("identify", help="identify a drive's errors from a measured TE record (CSV or NPZ)")
+    p.add_argument("config", help="study file (TOML) of the drive")
+    p.add_argument("record", help="measured record: CSV or NPZ (see docs/identification.md)")
+    p.add_argument("--out", required=True, help="results folder (new, empty, or an earlier gearte result)")
+    p.add_argument(
+        "--unit", action="append", default=[], metavar="QUANTITY=UNIT", help="unit of a column named without one, e.g. te=arcsec"
+    )
+    p.add_argument("--input-rpm", type=float, help="input speed, rpm (needed with a time column)")
+    p.add_argument("--ratio", type=float, help="transmission ratio (default: the drive's)")
+    p.add_argument("--adjust", default="", help="comma-separated sources to turn at re-assembly (any angle), e.g. sun_manufacturing")
+    p.add_argument("--fit", default="", help="grid drives: comma-separated sources to identify (default: all; the others stay at zero)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's starts")
+    a = sub.add_parser("assemble", help="selective assembly of a batch of measured parts")
+    a.add_argument("parts", help="CSV of parts: source,magnitude_um,phase_rad (or phase_deg), one row per part")
+    a.add_argument("--study", required=True, help="study file (TOML) of the drive")
+    a.add_argument("--out", required=True, help="results folder (new, empty, or an earlier gearte result)")
+    a.add_argument("--seed", type=int, default=0, help="seed of the random start and of the random assemblies")
+    a.add_argument("--random-batches", type=int, default=100, help="random assemblies of the same parts for the comparison")
+
+
 def _interrupted(done: bool) -> int:
     signum = interrupt_received() or getattr(sys.exc_info()[1], "signum", None) or signal.SIGINT
     what = "after the command had finished" if done else "no results were written; an earlier result is untouched"
@@ -182,16 +237,28 @@ def main(argv: list[str] | None = None) -> int:
         reset_interrupts()
 
 
-def _main(argv: list[str] | None) -> int:
-    args = _parser().parse_args(argv)
+def _setup_jax(args) -> None:
+    """What a computing command sets up first: float64, and the persistent compilation cache."""
+    enable_x64 = _import("..core.precision").enable_x64
+    if args.command != "grade":
+        for module in ("..drives.registry", "..studies.montecarlo", ".kinds"):  # what building a study imports
+            _import(module)
     # gearte's geometry needs float64; the command line turns it on before any array exists.
     enable_x64()
     if args.command != "grade" and getattr(args, "compile_cache", True) and cache_wanted():
         enable_compilation_cache()  # a second run of a study compiles nothing (gearte.core.cache)
         # An unreadable or unwritable cache entry only means compiling again: not the user's concern.
         warnings.filterwarnings("ignore", message=r"Error (reading|writing) persistent compilation cache entry")
+
+
+def _main(argv: list[str] | None) -> int:
+    args = _parser().parse_args(argv)
+    if args.command == "check":
+        # The file's own checks first, without JAX: a broken file is named at once.
+        _lazy("check_file")(args.config, samples=args.samples, seed=args.seed)
+    _setup_jax(args)
     if args.command == "grade":
-        tol = iso1328_tolerances(
+        tol = _lazy("iso1328_tolerances")(
             standard=args.standard,
             module=args.module,
             diameter=args.diameter,
@@ -220,19 +287,18 @@ def _main(argv: list[str] | None) -> int:
         )
         return 0
     if args.command in ("identify", "assemble"):
-        from . import identify_cmd
-
+        identify_cmd = _import(".identify_cmd")
         command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
         return (identify_cmd.run_identify if args.command == "identify" else identify_cmd.run_assemble)(args, command)
     if args.command == "compare":
-        compare_runs(args.runs, args.out)
+        _lazy("compare_runs")(args.runs, args.out)
         print(f"comparison written to {args.out}/report.md")
         return 0
     study = _study(args)
     check_output(args.out, inputs=[args.config])  # before anything is computed
     _confirm(args, study)
     command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
-    summary = run_study(study, args.out, progress=args.progress, command=command, inputs=[args.config])
+    summary = _lazy("run_study")(study, args.out, progress=args.progress, command=command, inputs=[args.config])
     te = summary["te"]
     sym = {"arcsec": "″", "arcmin": "′", "urad": " µrad", "pairs": " pairs"}[te["unit"]]
     print(

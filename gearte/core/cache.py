@@ -22,8 +22,6 @@ import os
 import sys
 from pathlib import Path
 
-import jax
-
 #: Size limit of the cache folder, bytes (JAX evicts the least recently used entries beyond it).
 MAX_SIZE_BYTES = 2 * 2**30
 
@@ -59,6 +57,8 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> Path
             return None
     except OSError:
         return None
+    import jax  # here, so that importing this module (the command line does) does not import JAX
+
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
