@@ -46,7 +46,7 @@ PHASE_RULES = ("uniform", "fixed", "relative", "optimise")
 ANGLE_SUFFIXES = {"rad": 1.0, "deg": math.pi / 180.0, "arcsec": 1.0 / ARCSEC_PER_RAD, "arcmin": 60.0 / ARCSEC_PER_RAD}
 #: The tables of the study kinds (`gearte.cli.kinds.STUDY_KINDS`, which imports JAX), for the file's
 #: first checks; a test keeps the two in step.
-KIND_TABLES = ("allocation", "budget", "sensitivity", "modification")
+KIND_TABLES = ("allocation", "budget", "sensitivity", "modification", "doe")
 
 
 @dataclasses.dataclass(frozen=True)
