@@ -151,7 +151,7 @@ class HelicalPlanetary(eqx.Module):
             periodicity=sol.periodicity,
         )
 
-    def fluctuation(self, amounts: Float[Array, "4"], *, smooth: float | None = None) -> Float[Array, "2"]:
+    def fluctuation(self, amounts: Float[Array, " 4"], *, smooth: float | None = None) -> Float[Array, " 2"]:
         """DTE fluctuation (µm) of planet 1's external and internal meshes for the design variables of
         Zhang, Chen & Wang, `amounts` = (sun tip relief, sun crowning, planet tip relief, planet crowning), µm
         (`modifications_from_amounts`). Jittable, vmappable over `amounts`, differentiable.

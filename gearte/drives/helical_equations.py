@@ -205,56 +205,66 @@ def layout(stage: HelicalStage, geom: Geometry) -> StageLayout:
     return StageLayout(origin, radius, normals, points, members)
 
 
-def contact_projection(lay: StageLayout, n_dof: int, a: int, b: int, point, normal) -> Float[Array, " d"]:
-    """Projection g of a contact at `point` (mm) along `normal` between members `a` (pushed along +normal) and `b`."""
+def contact_projections(lay: StageLayout, points: Float[Array, "m k 3"]) -> Float[Array, "m k d"]:
+    """Projections g of the contacts of every mesh m at `points` (mm) along the mesh's normal: member A (sun or
+    ring, pushed along +normal) and planet B, g = [−(n, (p − o_A)×n / R_A) on A, +(n, (p − o_B)×n / R_B) on B]."""
+    n_members = lay.origin.shape[0]
+    a_idx = jnp.asarray([a for a, _ in lay.members])
+    b_idx = jnp.asarray([b for _, b in lay.members])
+    normal = jnp.broadcast_to(lay.normal[:, None, :], points.shape)
 
-    def block(i):
-        return jnp.concatenate([normal, jnp.cross(point - lay.origin[i], normal) / lay.radius[i]])
+    def block(idx):
+        arm = points - lay.origin[idx][:, None, :]
+        return jnp.concatenate([normal, jnp.cross(arm, normal) / lay.radius[idx][:, None, None]], axis=-1)
 
-    g = jnp.zeros(n_dof)
-    g = g.at[6 * a : 6 * a + 6].add(-block(a))
-    return g.at[6 * b : 6 * b + 6].add(block(b))
+    one_a = jax.nn.one_hot(a_idx, n_members)
+    one_b = jax.nn.one_hot(b_idx, n_members)
+    g = -jnp.einsum("mb,mkc->mkbc", one_a, block(a_idx)) + jnp.einsum("mb,mkc->mkbc", one_b, block(b_idx))
+    return g.reshape(points.shape[0], points.shape[1], 6 * n_members)
 
 
 def support_projections(stage: HelicalStage, lay: StageLayout) -> tuple[Float[Array, "p d"], Float[Array, " p"], Float[Array, " p"]]:
     """Projections, stiffness (N/µm or N·m/rad) and damping ratios of every support and planet-bearing spring."""
+    n = stage.n_planets
     d = stage.n_dof
-    eye = jnp.eye(d)
-    rows, k, zeta = [], [], []
-    for member in range(3):
-        for j in range(6):
-            scale = 1.0 if j < 3 else 1.0 / lay.radius[member]
-            rows.append(eye[6 * member + j] * scale)
-            k.append(stage.support_stiffness[member, j])
-            zeta.append(stage.support_damping_ratio[member, j])
-    kp, zp = stage.support_stiffness[3], stage.support_damping_ratio[3]
-    for i in range(stage.n_planets):
-        p = 3 + i
-        psi = stage.planet_angles[i]
-        radial = jnp.stack([jnp.cos(psi), jnp.sin(psi), 0.0])
-        tangential = jnp.stack([-jnp.sin(psi), jnp.cos(psi), 0.0])
-        for j, e in enumerate((radial, tangential, jnp.asarray([0.0, 0.0, 1.0]))):
-            g = jnp.zeros(d).at[6 * p : 6 * p + 3].set(e)
-            arm = jnp.cross(lay.origin[p] - lay.origin[CARRIER], e) / lay.radius[CARRIER]
-            rows.append(g.at[0:3].add(-e).at[3:6].add(-arm))
-            k.append(kp[j])
-            zeta.append(zp[j])
-        for j in (3, 4):
-            rows.append(eye[6 * p + j] / lay.radius[p] - eye[j] / lay.radius[CARRIER])
-            k.append(kp[j])
-            zeta.append(zp[j])
-    return jnp.stack(rows), jnp.stack(k), jnp.stack(zeta)
+    # Carrier, ring, sun to the housing: translations as they are, tilts and torsion u/R = θ.
+    scale = jnp.concatenate([jnp.concatenate([jnp.ones(3), jnp.ones(3) / lay.radius[i]]) for i in range(3)])
+    ground = jnp.eye(18, d) * scale[:, None]
+    # Planet bearings: planet centre minus the carrier's point under it, radial / tangential / axial; tilts.
+    psi = stage.planet_angles
+    zeros, ones = jnp.zeros(n), jnp.ones(n)
+    dirs = jnp.stack(
+        [
+            jnp.stack([jnp.cos(psi), jnp.sin(psi), zeros], -1),
+            jnp.stack([-jnp.sin(psi), jnp.cos(psi), zeros], -1),
+            jnp.stack([zeros, zeros, ones], -1),
+        ],
+        axis=1,
+    )  # (n, 3 directions, 3)
+    arm = jnp.cross(lay.origin[3:, None, :], dirs) / lay.radius[CARRIER]
+    one = jnp.eye(n)
+    planet_t = jnp.einsum("ip,ijc->ijpc", one, jnp.concatenate([dirs, jnp.zeros_like(dirs)], -1)).reshape(n, 3, 6 * n)
+    carrier_t = -jnp.concatenate([dirs, arm], -1)
+    trans = jnp.concatenate([carrier_t, jnp.zeros((n, 3, 12)), planet_t], -1)
+    tilt_local = jnp.zeros((n, 2, 6)).at[:, 0, 3].set(1.0).at[:, 1, 4].set(1.0)
+    planet_r = jnp.einsum("ip,ijc->ijpc", one, tilt_local / lay.radius[3:, None, None]).reshape(n, 2, 6 * n)
+    carrier_r = -tilt_local / lay.radius[CARRIER]
+    tilt = jnp.concatenate([carrier_r, jnp.zeros((n, 2, 12)), planet_r], -1)
+    bearing = jnp.concatenate([trans, tilt], axis=1).reshape(5 * n, d)
+    kp = jnp.tile(stage.support_stiffness[3, :5], n)
+    zp = jnp.tile(stage.support_damping_ratio[3, :5], n)
+    rows = jnp.concatenate([ground, bearing])
+    k = jnp.concatenate([stage.support_stiffness[:3].reshape(-1), kp])
+    zeta = jnp.concatenate([stage.support_damping_ratio[:3].reshape(-1), zp])
+    return rows, k, zeta
 
 
 def physical_mass(stage: HelicalStage, lay: StageLayout) -> Float[Array, " d"]:
     """Generalised masses, kg (a rotation coordinate u = R θ: I/R², R in m)."""
-    rows = []
-    for member in range(3 + stage.n_planets):
-        kind = min(member, 3)
-        r_m = lay.radius[member] * 1e-3
-        m, ip, it = stage.mass[kind], stage.polar_inertia[kind], stage.tilt_inertia[kind]
-        rows.append(jnp.stack([m, m, m, it / r_m**2, it / r_m**2, ip / r_m**2]))
-    return jnp.concatenate(rows)
+    kind = np.minimum(np.arange(3 + stage.n_planets), 3)
+    r_m = lay.radius * 1e-3
+    m, ip, it = stage.mass[kind], stage.polar_inertia[kind], stage.tilt_inertia[kind]
+    return jnp.stack([m, m, m, it / r_m**2, it / r_m**2, ip / r_m**2], axis=-1).reshape(-1)
 
 
 def _damping(g, k, zeta, inv_mass):
@@ -308,12 +318,11 @@ def stage_system(
     z = slice_centres(stage.face_width, n_slices)
     n_mesh = 2 * stage.n_planets
 
-    def proj(m, zk):
-        a, b = lay.members[m]
-        return contact_projection(lay, d, a, b, lay.pitch_point[m] + jnp.stack([0.0, 0.0, zk]), lay.normal[m])
-
-    g_mid = jnp.stack([proj(m, 0.0) for m in range(n_mesh)])
-    g_slices = jnp.stack([jax.vmap(lambda zk, m=m: proj(m, zk))(z) for m in range(n_mesh)]).reshape(n_mesh * n_slices, d)
+    z_mid = jnp.concatenate([jnp.zeros(1), z])
+    points = lay.pitch_point[:, None, :] + z_mid[None, :, None] * jnp.asarray([0.0, 0.0, 1.0])
+    g_all = contact_projections(lay, points)
+    g_mid = g_all[:, 0]
+    g_slices = g_all[:, 1:].reshape(n_mesh * n_slices, d)
     kind = np.repeat([0, 1], stage.n_planets)
     k_mean = stage.mesh_stiffness[kind] * stage.face_width  # N/µm
     c_mesh = _damping(g_mid, k_mean, stage.mesh_damping_ratio[kind], inv_mass)

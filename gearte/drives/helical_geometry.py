@@ -88,13 +88,13 @@ class HelicalStage(eqx.Module):
     helix_angle: Float[Array, ""]
     face_width: Float[Array, ""]
     planet_angles: Float[Array, " n"]
-    mass: Float[Array, "4"]
-    polar_inertia: Float[Array, "4"]
-    tilt_inertia: Float[Array, "4"]
+    mass: Float[Array, " 4"]
+    polar_inertia: Float[Array, " 4"]
+    tilt_inertia: Float[Array, " 4"]
     support_stiffness: Float[Array, "4 6"]
     support_damping_ratio: Float[Array, "4 6"]
-    mesh_stiffness: Float[Array, "2"]
-    mesh_damping_ratio: Float[Array, "2"]
+    mesh_stiffness: Float[Array, " 2"]
+    mesh_damping_ratio: Float[Array, " 2"]
     carrier_torque: Float[Array, ""]
     carrier_speed: Float[Array, ""]
 
@@ -193,15 +193,15 @@ class Geometry(eqx.Module):
     transverse_module: Float[Array, ""]
     transverse_pressure_angle: Float[Array, ""]
     base_helix_angle: Float[Array, ""]
-    radius: Float[Array, "3"]
-    base_radius: Float[Array, "3"]
-    tip_radius: Float[Array, "3"]
+    radius: Float[Array, " 3"]
+    base_radius: Float[Array, " 3"]
+    tip_radius: Float[Array, " 3"]
     centre_distance: Float[Array, ""]
     base_pitch: Float[Array, ""]
-    path_length: Float[Array, "2"]
-    contact_ratio: Float[Array, "2"]
+    path_length: Float[Array, " 2"]
+    contact_ratio: Float[Array, " 2"]
     overlap_ratio: Float[Array, ""]
-    pitch_point: Float[Array, "2"]
+    pitch_point: Float[Array, " 2"]
     mesh_period: Float[Array, ""]
     mesh_frequency: Float[Array, ""]
 
@@ -257,7 +257,7 @@ def mesh_phases(stage: HelicalStage) -> tuple[Float[Array, " n"], Float[Array, "
     return jnp.mod(ext, 1.0), jnp.mod(internal, 1.0)
 
 
-def iso6336_mesh_stiffness(stage: HelicalStage) -> tuple[Float[Array, "2"], Float[Array, "2"]]:
+def iso6336_mesh_stiffness(stage: HelicalStage) -> tuple[Float[Array, " 2"], Float[Array, " 2"]]:
     """Single stiffness c' and mean mesh stiffness c_γα, N/(mm·µm), of the external and internal meshes by
     ISO 6336-1 method B: c'_th = 1/q' (q' from the virtual tooth counts; an internal mesh takes
     z_n2 = ∞), c' = c'_th C_M C_R C_B cos β with C_M = 0.8, C_R = C_B = 1 (solid gears, standard basic

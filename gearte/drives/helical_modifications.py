@@ -107,7 +107,7 @@ class StageModifications(eqx.Module):
         self.ring = ring if ring is not None else ToothModification()
 
 
-def modifications_from_amounts(amounts: Float[Array, "4"], *, shape: str = "linear") -> StageModifications:
+def modifications_from_amounts(amounts: Float[Array, " 4"], *, shape: str = "linear") -> StageModifications:
     """The modifications of Zhang, Chen & Wang's study from the design variables x = (x₁, x₂, x₃, x₄), µm:
     sun tip relief x₁ and crowning x₂, planet tip relief x₃ and crowning x₄ (on both planet flanks);
     relief from the single/double-contact boundary to the tip. Traceable (for `jax.grad` and `jax.vmap`)."""

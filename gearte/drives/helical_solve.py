@@ -84,7 +84,7 @@ def solve_periodic(system: MeshedSystem, solver: PeriodicSolver, *, y0: Float[Ar
         saveat=diffrax.SaveAt(ts=ts),
         stepsize_controller=diffrax.ConstantStepSize(),
         max_steps=n * solver.steps_per_period + 16,
-        adjoint=diffrax.RecursiveCheckpointAdjoint(),
+        adjoint=diffrax.RecursiveCheckpointAdjoint(checkpoints=n * solver.steps_per_period + 16),
     )
     ys = sol.ys
     assert ys is not None
