@@ -63,6 +63,14 @@ from .drives import (
     Planetary2KH as Planetary2KH,
     SourceSpec as SourceSpec,
 )
+from .drives.helical import DynamicResponse as DynamicResponse, HelicalPlanetary as HelicalPlanetary, load_helical as load_helical
+from .drives.helical_geometry import HelicalStage as HelicalStage
+from .drives.helical_modifications import (
+    StageModifications as StageModifications,
+    ToothModification as ToothModification,
+    modifications_from_amounts as modifications_from_amounts,
+)
+from .drives.helical_solve import PeriodicSolver as PeriodicSolver
 from .identification import (
     BatchAssembly as BatchAssembly,
     Diagnosis as Diagnosis,

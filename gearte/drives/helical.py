@@ -31,7 +31,7 @@ from .helical_equations import SUN, StageSystem, error_sources, stage_system
 from .helical_geometry import MEMBERS, HelicalStage, geometry
 from .helical_modifications import StageModifications, modifications_from_amounts
 from .helical_solve import PeriodicSolver, harmonics, peak_to_peak, smooth_peak_to_peak, solve_periodic
-from .helical_stiffness import STIFFNESS_MODELS, pair_range
+from .helical_stiffness import STIFFNESS_MODELS, SlicedMeshes, pair_range
 from .protocol import Eccentricity
 
 #: Zhang, Chen & Wang's unmodified DTE fluctuations of the 750 kW stage, µm (external s–p, internal p–r).
@@ -122,7 +122,8 @@ class HelicalPlanetary(eqx.Module):
         )
         if self.stiffness_model == "transverse":
             exc = sys.system.excitation
-            sys = eqx.tree_at(lambda s: s.system.excitation.lead_shift, sys, jnp.zeros_like(exc.lead_shift))  # pyright: ignore[reportAttributeAccessIssue]
+            assert isinstance(exc, SlicedMeshes)
+            sys = eqx.tree_at(lambda s: s.system.excitation, sys, eqx.tree_at(lambda e: e.lead_shift, exc, jnp.zeros_like(exc.lead_shift)))
         return sys
 
     def response(

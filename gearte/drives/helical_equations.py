@@ -23,7 +23,7 @@ differentiable, so the integrator keeps its order and gradients stay finite; its
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import equinox as eqx
 import jax
@@ -56,7 +56,7 @@ class MeshedSystem(eqx.Module):
     projection: Float[Array, "s d"]
     pair_stiffness: Float[Array, " s"]
     pair_damping: Float[Array, " s"]
-    excitation: eqx.Module
+    excitation: Callable[[Array], tuple[Array, Array]]
     contact_smoothing: Float[Array, ""]
 
     def pair_forces(self, tau, q, v) -> Float[Array, "s j"]:

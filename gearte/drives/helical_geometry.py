@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -111,13 +112,13 @@ class HelicalStage(eqx.Module):
         n_planets: int = 3,
         planet_angles: Sequence[float] | None = None,
         sun_hand: str = "right",
-        mass,
-        polar_inertia,
-        tilt_inertia,
-        support_stiffness,
-        support_damping_ratio=0.05,
-        mesh_stiffness=20.0,
-        mesh_damping_ratio=0.07,
+        mass: Any,
+        polar_inertia: Any,
+        tilt_inertia: Any,
+        support_stiffness: Any,
+        support_damping_ratio: Any = 0.05,
+        mesh_stiffness: Any = 20.0,
+        mesh_damping_ratio: Any = 0.07,
         carrier_torque: float,
         carrier_speed: float,
     ):

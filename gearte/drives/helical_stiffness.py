@@ -24,6 +24,7 @@ alternation: it handles the overlap ratio by construction, and the same slices c
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -76,7 +77,7 @@ class SlicedMeshes(eqx.Module):
     contact_ratio: Float[Array, " m"]
     crowning: Float[Array, "m k"]
     modifications: StageModifications
-    errors: eqx.Module | None
+    errors: Callable[[Array], Array] | None
     n_planets: int = eqx.field(static=True)
     n_slices: int = eqx.field(static=True)
     pairs: tuple[int, int] = eqx.field(static=True)
