@@ -18,6 +18,7 @@ import shlex
 import signal
 import sys
 import warnings
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .. import __version__
@@ -153,6 +154,22 @@ def _parser() -> argparse.ArgumentParser:
         help="keep compiled programs on disk for the next run (default: on; folder: $GEARTE_CACHE_DIR, else ~/.cache/gearte/jax; "
         "GEARTE_COMPILATION_CACHE=0 also turns it off)",
     )
+    r.add_argument(
+        "--keep-samples",
+        action="store_true",
+        help="a study streamed for its size (statistics accumulated chunk by chunk) also writes every sample's value to "
+        "samples_te.npy, chunk by chunk; smaller studies always write samples.npz",
+    )
+    d = r.add_argument_group(
+        "several machines (jax.distributed)",
+        "every process runs the same command; each computes its share of the samples, process 0 writes the results",
+    )
+    d.add_argument("--processes", type=_positive_int, help="number of processes (with --process-id and --coordinator)")
+    d.add_argument("--process-id", type=int, help="this process's number, 0 … processes − 1")
+    d.add_argument("--coordinator", help="HOST:PORT of process 0's coordination service")
+    d.add_argument(
+        "--cluster", action="store_true", help="take processes, ids and coordinator from the cluster scheduler's environment (e.g. SLURM)"
+    )
     c = sub.add_parser("compare", help="compare finished runs side by side")
     c.add_argument("runs", nargs="+", help="results folders of `gearte run`")
     c.add_argument("--out", required=True, help="folder for the comparison report (not one of the runs)")
@@ -237,8 +254,36 @@ def main(argv: list[str] | None = None) -> int:
         reset_interrupts()
 
 
+def _distributed(args) -> None:
+    """Join the processes of a several-machine run (`jax.distributed`), before JAX computes anything."""
+    given = [getattr(args, k, None) is not None for k in ("processes", "process_id", "coordinator")]
+    cluster = getattr(args, "cluster", False)
+    if not any(given) and not cluster:
+        return
+    if cluster and any(given):
+        raise ConfigError(
+            "--cluster takes the processes from the scheduler: give it alone, or give --processes, --process-id and --coordinator"
+        )
+    if not cluster and not all(given):
+        raise ConfigError("several processes need all three of --processes, --process-id and --coordinator (HOST:PORT)")
+    if not cluster and not 0 <= args.process_id < args.processes:
+        raise ConfigError(f"--process-id must be in 0 … {args.processes - 1}, got {args.process_id}")
+    if not cluster and (":" not in args.coordinator or not args.coordinator.rpartition(":")[2].isdigit()):
+        raise ConfigError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
+    import jax
+
+    # CPU devices of different processes talk through gloo (GPUs use their own collectives).
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    if cluster:
+        jax.distributed.initialize()
+    else:
+        jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.processes, process_id=args.process_id)
+
+
 def _setup_jax(args) -> None:
     """What a computing command sets up first: float64, and the persistent compilation cache."""
+    if args.command == "run":
+        _distributed(args)
     enable_x64 = _import("..core.precision").enable_x64
     if args.command != "grade":
         for module in ("..drives.registry", "..studies.montecarlo", ".kinds"):  # what building a study imports
@@ -298,7 +343,18 @@ def _main(argv: list[str] | None) -> int:
     check_output(args.out, inputs=[args.config])  # before anything is computed
     _confirm(args, study)
     command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
-    summary = _lazy("run_study")(study, args.out, progress=args.progress, command=command, inputs=[args.config])
+    import jax
+
+    if jax.process_index() != 0:
+        # Another process of a several-machine run: it computes its share; process 0 writes the results.
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="gearte-process-") as scratch:
+            _lazy("run_study")(study, Path(scratch) / "out", progress=False, command=command, keep_samples=False)
+        return 0
+    summary = _lazy("run_study")(
+        study, args.out, progress=args.progress, command=command, inputs=[args.config], keep_samples=args.keep_samples
+    )
     te = summary["te"]
     sym = {"arcsec": "″", "arcmin": "′", "urad": " µrad", "pairs": " pairs"}[te["unit"]]
     print(

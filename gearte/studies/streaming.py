@@ -131,6 +131,7 @@ class StreamingStatistics:
         self._max = np.full(m, -np.inf)
         self._keys = [np.empty(0, np.uint64) for _ in range(m)]
         self._counts = [np.empty(0, np.int64) for _ in range(m)]
+        self._first = [np.empty(0, np.int64) for _ in range(m)]  # first sample index in each bin
 
     # ------------------------------------------------------------------ feeding
 
@@ -165,7 +166,8 @@ class StreamingStatistics:
         np.minimum(self._min, v.min(axis=0), out=self._min)
         np.maximum(self._max, v.max(axis=0), out=self._max)
         for j in range(self._m):
-            self._add_bins(j, *np.unique(_ordered(v[:, j]) >> self._shift, return_counts=True))
+            keys, first, counts = np.unique(_ordered(v[:, j]) >> self._shift, return_index=True, return_counts=True)
+            self._add_bins(j, keys, counts, first + self._n)
         data = np.concatenate([self._partial, v]) if len(self._partial) else v
         full = len(data) // self.block * self.block
         for s in range(0, full, self.block):
@@ -176,11 +178,30 @@ class StreamingStatistics:
         self._partial = np.array(data[full:])
         self._n += len(v)
 
-    def _add_bins(self, j: int, keys: np.ndarray, counts: np.ndarray) -> None:
+    def _add_bins(self, j: int, keys: np.ndarray, counts: np.ndarray, first: np.ndarray) -> None:
         allk = np.concatenate([self._keys[j], keys])
         uk, inv = np.unique(allk, return_inverse=True)
         self._keys[j] = uk
         self._counts[j] = np.bincount(inv, weights=np.concatenate([self._counts[j], counts]), minlength=len(uk)).astype(np.int64)
+        lowest = np.full(len(uk), np.iinfo(np.int64).max)
+        np.minimum.at(lowest, inv, np.concatenate([self._first[j], first]))
+        self._first[j] = lowest
+
+    def bin_keys(self, values) -> np.ndarray:
+        """The histogram bin of each value (sign, exponent and top `bits` mantissa bits, as an ordered integer)."""
+        return _ordered(np.asarray(values, dtype=np.float64)) >> self._shift
+
+    def sample_near(self, value: float, metric: int | None = None) -> int:
+        """The index (in stream order) of the first sample in the bin of `value`, or of the nearest bin holding
+        samples: a sample within one bin width (2^-bits relative) of `value` when its bin is not empty."""
+        j = self._column(metric)
+        self._require()
+        key = self.bin_keys(np.asarray([value]))[0]
+        keys = self._keys[j]
+        i = int(np.searchsorted(keys, key))
+        near = [c for c in (i - 1, i) if 0 <= c < len(keys)]
+        best = min(near, key=lambda c: (abs(int(keys[c]) - int(key)), c))
+        return int(self._first[j][best])
 
     def merge(self, other: StreamingStatistics) -> StreamingStatistics:
         """The accumulator of this one's samples followed by `other`'s (a new object; both unchanged).
@@ -210,8 +231,8 @@ class StreamingStatistics:
         out._min = np.minimum(self._min, other._min)
         out._max = np.maximum(self._max, other._max)
         for j in range(self._m):
-            out._keys[j], out._counts[j] = self._keys[j], self._counts[j]
-            out._add_bins(j, other._keys[j], other._counts[j])
+            out._keys[j], out._counts[j], out._first[j] = self._keys[j], self._counts[j], self._first[j]
+            out._add_bins(j, other._keys[j], other._counts[j], other._first[j] + self._n)
         return out
 
     # ------------------------------------------------------------------ results
