@@ -702,8 +702,20 @@ def _reference_rotations(drive, err, theta_T):
         psi0 = theta_T + 2 * np.pi * j / zb
         psi = psi0 + e["pin_tangential"][j] * um / R1
         rad = R1 + e["pin_radial"][j] * um
-        ob = np.array([e["pin_wheel_offset"] * np.cos(e["pin_wheel_offset_phase"]), -(a + e["eccentricity"] * um) / um + e["pin_wheel_offset"] * np.sin(e["pin_wheel_offset_phase"])]) * um
-        c = ob + rad * np.array([-np.sin(psi), np.cos(psi)]) - e["disc_offset"] * um * np.array([np.cos(e["disc_offset_phase"]), np.sin(e["disc_offset_phase"])])
+        ob = (
+            np.array(
+                [
+                    e["pin_wheel_offset"] * np.cos(e["pin_wheel_offset_phase"]),
+                    -(a + e["eccentricity"] * um) / um + e["pin_wheel_offset"] * np.sin(e["pin_wheel_offset_phase"]),
+                ]
+            )
+            * um
+        )
+        c = (
+            ob
+            + rad * np.array([-np.sin(psi), np.cos(psi)])
+            - e["disc_offset"] * um * np.array([np.cos(e["disc_offset_phase"]), np.sin(e["disc_offset_phase"])])
+        )
         phi_nom = (psi0 - 2 * np.pi * j + np.pi) % (2 * np.pi) - np.pi
         s = 1.0 if phi_nom >= -1e-9 else -1.0
         n = int(np.floor((psi0 - 2 * np.pi * j) / (2 * np.pi) + 1e-9 + 0.5)) % za
@@ -714,13 +726,18 @@ def _reference_rotations(drive, err, theta_T):
             u, v = phi / za, phi * zb / za
             S = np.sqrt(1 + K * K - 2 * K * np.cos(phi))
             d = rZ - r1
-            p = np.array([RZ * np.sin(u) - a * np.sin(v) - d * (np.sin(u) - K * np.sin(v)) / S, RZ * np.cos(u) - a * np.cos(v) - d * (np.cos(u) - K * np.cos(v)) / S])
+            p = np.array(
+                [
+                    RZ * np.sin(u) - a * np.sin(v) - d * (np.sin(u) - K * np.sin(v)) / S,
+                    RZ * np.cos(u) - a * np.cos(v) - d * (np.cos(u) - K * np.cos(v)) / S,
+                ]
+            )
             p = np.array([[np.cos(s * m), np.sin(s * m)], [-np.sin(s * m), np.cos(s * m)]]) @ p  # turned by −s m
             p = p + np.array([e["dressing_x"], e["dressing_y"] + e["infeed"][n]]) * um
             p = np.array([[np.cos(beta), np.sin(beta)], [-np.sin(beta), np.cos(beta)]]) @ p  # turned by −β
             return p - np.array([ex, ey])
 
-        h = lambda t: np.hypot(*locus(t)) - np.hypot(*c)
+        h = lambda t, c=c, locus=locus: np.hypot(*locus(t)) - np.hypot(*c)
         interference, reachable = h(0.0) > 0, h(np.pi) >= 0
         if interference or not reachable:
             out.append((np.nan, reachable, interference))

@@ -25,7 +25,7 @@ from ..core.precision import require_x64
 from ..core.units import TWO_PI
 from ..core.validate import as_int
 from .cycloid_pin_geometry import UM, CycloidErrors, _placed_curve, _placement, _rot, checked_errors
-from .cycloid_pin_solve import RESIDUAL_TOL_MM, Contact, contacts, materialise, sincos
+from .cycloid_pin_solve import Contact, contacts, materialise, sincos
 
 if TYPE_CHECKING:
     from .cycloid_pin import CycloidPin
