@@ -30,11 +30,11 @@ from ..studies.laws import FixedPhase, Optimised
 from ..studies.montecarlo import PERCENTILES, TEStudy, as_key, default_block_size, monte_carlo, statistics
 from ..studies.streaming import StreamingStatistics
 from . import plots
-from .samples_file import SamplesWriter
 from .config import Study
 from .io import atomic_output_dir, commit_point, write_json, written_files
 from .kind_base import Finish, KindOutcome
 from .kinds import STUDY_KINDS
+from .samples_file import SamplesWriter
 
 
 def versions() -> dict:
