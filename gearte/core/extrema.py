@@ -201,7 +201,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     for j in range(n_orders):
         g = g + a[:, j, None].astype(f32) * cos_tab[j].astype(np.float32) + b[:, j, None].astype(f32) * sin_tab[j].astype(np.float32)
     g = g.reshape(n, nb, block)
-    top = jnp.concatenate([jnp.max(g, axis=-1), -jnp.min(g, axis=-1)]).astype(a.dtype)  # (2B, nb)
+    top = jnp.concatenate([jnp.max(g, axis=-1), -jnp.min(g, axis=-1)])  # (2B, nb), float32: ranks blocks
 
     sgn = jnp.concatenate([jnp.ones(n, dtype=a.dtype), -jnp.ones(n, dtype=a.dtype)])
     a2 = sgn[:, None] * jnp.concatenate([a, a])
@@ -236,7 +236,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         denom = fm - 2.0 * fc + fp
         curved = denom < 0.0
         t = h * (1.0 + j.astype(w.dtype) + jnp.where(curved, jnp.clip(0.5 * d1 / jnp.where(curved, denom, -1.0), -0.5, 0.5), 0.0))
-        ts, vals = [], []
+        best_t, best_v = t, None
         for step_no in range(newton_steps + 1):
             c1, s1 = _cis_small(t)
             ck, sk = _cis_powers(c1, s1, orders)  # (r, c, K)
@@ -246,22 +246,27 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
                 fv = fv + even
                 f1 = f1 + kq * (big_b[q] * ck[..., q] - big_a[q] * sk[..., q])
                 f2 = f2 - kq * kq * even
-            ts.append(t)
-            vals.append(fv)
+            # The best point visited so far (the first of equals): no stacking of the steps, which XLA
+            # would fuse by recomputing every step once per output.
+            if best_v is None:
+                best_v = fv
+            else:
+                better = fv > best_v
+                best_t, best_v = jnp.where(better, t, best_t), jnp.where(better, fv, best_v)
             if step_no == newton_steps:
                 break
             concave = f2 < 0.0
             t = t + jnp.clip(jnp.where(concave, -f1 / jnp.where(concave, f2, 1.0), 0.0), -h, h)
-        r = sel.shape[0]
-        t_all = (jnp.stack(ts, axis=-1) + (p0.astype(w.dtype) * h)[..., None]).reshape(r, -1)
-        v_all = jnp.stack(vals, axis=-1).reshape(r, -1)
-        best = jnp.argmax(v_all, axis=-1)[:, None]
+        assert best_v is not None
+        best = _argmax(best_v)[:, None]  # the best candidate (the first of equals)
+        tau_new = jnp.take_along_axis(best_t + p0.astype(w.dtype) * h, best, axis=-1)[:, 0]
+        v_new = jnp.take_along_axis(best_v, best, axis=-1)[:, 0]
         taken = jnp.any(jnp.arange(nb) == sel[..., None], axis=-2)
-        return taken, jnp.take_along_axis(t_all, best, axis=-1)[:, 0], jnp.take_along_axis(v_all, best, axis=-1)[:, 0]
+        return taken, tau_new, v_new
 
     def uncertified(state):
         remaining, _, best_val = state
-        return jnp.max(jnp.where(remaining, top, -jnp.inf), axis=-1) + margin > best_val
+        return jnp.max(jnp.where(remaining, top, -jnp.inf), axis=-1).astype(best_val.dtype) + margin > best_val
 
     # Round one: every row.
     taken, tau, val = refine(jnp.ones((rows, nb), dtype=bool), top, a2, b2, off2)

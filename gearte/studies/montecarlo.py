@@ -145,8 +145,9 @@ def _run_step(fn, key, starts, block: int, mesh: jax.sharding.Mesh):
 
 
 def default_block_size(bytes_per_sample: int, *, budget_bytes: int = 128 * 2**20) -> int:
-    """Largest power of two ≤ 1024 whose block of samples fits in `budget_bytes`."""
-    c = max(1, min(1024, budget_bytes // max(1, bytes_per_sample)))
+    """Largest power of two ≤ 4096 whose block of samples fits in `budget_bytes` (larger blocks spread the
+    per-call cost of a compiled program over more samples)."""
+    c = max(1, min(4096, budget_bytes // max(1, bytes_per_sample)))
     return 1 << int(math.floor(math.log2(c)))
 
 
