@@ -117,6 +117,8 @@ def _duration(s: float) -> str:
 
 def _confirm(args, study: Study) -> None:
     """Estimate a large run before starting it; refuse one above the thresholds without --yes."""
+    if study.samples <= _import(".run").MEASURE_ABOVE:
+        return  # small enough to start at once (and not worth tracing the study twice)
     cost = _lazy("estimate_cost")(study)
     if cost.seconds is None:
         return
@@ -124,6 +126,8 @@ def _confirm(args, study: Study) -> None:
     what = (
         f"about {_duration(cost.seconds)} of Monte Carlo at {cost.rate:,.0f} samples/s on this machine (study kinds not "
         f"included), and {_size(cost.bytes)} of per-sample results held in memory and written to samples.npz"
+        if cost.bytes
+        else f"about {_duration(cost.seconds)} of Monte Carlo at {cost.rate:,.0f} samples/s on this machine, streamed (nothing held per sample)"
     )
     if cost.seconds > _lazy("CONFIRM_SECONDS") or cost.bytes > _lazy("CONFIRM_BYTES"):
         if not args.yes:

@@ -14,6 +14,7 @@ import importlib
 import importlib.metadata
 import math
 import platform
+import threading
 import time
 from pathlib import Path
 
@@ -29,7 +30,6 @@ from ..studies.errors import ErrorModel, ErrorSource
 from ..studies.laws import FixedPhase, Optimised
 from ..studies.montecarlo import PERCENTILES, TEStudy, as_key, default_block_size, monte_carlo, statistics
 from ..studies.streaming import StreamingStatistics
-from . import plots
 from .config import Study
 from .io import atomic_output_dir, commit_point, write_json, written_files
 from .kind_base import Finish, KindOutcome
@@ -90,11 +90,17 @@ def _trace_in_unit(study: Study, index: int) -> tuple[np.ndarray, np.ndarray]:
     return tr.theta / (2 * math.pi), np.asarray(angle_from_rad(tr.te, study.unit))
 
 
+def _plots():
+    from . import plots  # matplotlib: imported when the first plot is drawn
+
+    return plots
+
+
 def _draw(figure: Figure, folder: Path) -> None:
     """Draw a declared figure: `plot` names a function of `gearte.cli.plots`, or ``"module:function"`` (a drive's
     own plots module beside it, e.g. ``"gearte.drives.cycloid_pin_plots:rotation_error"``)."""
     module, _, name = figure.plot.rpartition(":")
-    fn = getattr(importlib.import_module(module) if module else plots, name, None)
+    fn = getattr(importlib.import_module(module) if module else _plots(), name, None)
     if fn is None:
         raise ValueError(f"figure {figure.filename}: no plot function {figure.plot!r}")
     fn(**figure.data, path=folder / figure.filename)
@@ -142,7 +148,7 @@ def estimate_cost(study: Study, *, measure_above: int | None = None) -> Cost:
     fn = _sampler(_phases_to_choose_held(study))
     shapes = jax.eval_shape(fn, as_key(0))
     per = 3 * 8 + sum(int(np.prod(x.shape)) * x.dtype.itemsize for x in jax.tree.leaves(shapes[1]))  # te, te_rad, index
-    nbytes = per * study.samples
+    nbytes = 0 if _streams(study, fn) else per * study.samples
     if study.samples <= (MEASURE_ABOVE if measure_above is None else measure_above):
         return Cost(study.samples, nbytes)
     # The smallest compiled call (two blocks), run twice: the second is timed.
@@ -240,6 +246,8 @@ def _monte_carlo_streamed(study: Study, sampler: _RunSample, tmp: Path, *, progr
 
 def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None, keep_samples: bool = False) -> dict:
     t_start = time.perf_counter()
+    # The plots' library loads in the background while the Monte Carlo computes (XLA releases the GIL).
+    threading.Thread(target=importlib.import_module, args=("matplotlib.figure",), daemon=True).start()
     original = study
     outcomes: list[KindOutcome] = []
     for kind in STUDY_KINDS:
@@ -359,7 +367,7 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
         np.savez(tmp / "samples.npz", **arrays)
     for name, content in extra.files.items():
         np.savez_compressed(tmp / name, **content)
-    plots.histogram(
+    _plots().histogram(
         values,
         stats,
         unit=study.unit,
@@ -368,7 +376,7 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
         path=tmp / "histogram.png",
         counts=hist,
     )
-    plots.trace(
+    _plots().trace(
         tr.theta / (2 * math.pi),
         te_trace,
         unit=study.unit,

@@ -30,7 +30,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.stats import norm, qmc
 from tqdm import tqdm
 
 from ..core.precision import require_x64
@@ -254,6 +253,8 @@ class LatinHypercube(AbstractDesign):
 
     def points(self, n_vars: int) -> np.ndarray:
         d = _count_vars(n_vars)
+        from scipy.stats import qmc  # scipy.stats takes a second to import: only when a design needs it
+
         u = qmc.LatinHypercube(d, scramble=not self.centred, rng=np.random.default_rng(self.seed)).random(self.n)
         return 2.0 * u - 1.0
 
@@ -287,6 +288,8 @@ class SobolSequence(AbstractDesign):
         d = _count_vars(n_vars)
         if d > 21201:
             raise ValueError(f"SobolSequence: at most 21201 variables, got {d}")
+        from scipy.stats import qmc
+
         s = qmc.Sobol(d, scramble=self.scramble, rng=np.random.default_rng(self.seed))
         return 2.0 * s.random_base2(int(math.log2(self.n))) - 1.0
 
@@ -337,6 +340,8 @@ class Variable(eqx.Module):
             raise ValueError(f"Variable {name!r}: std must be a number > 0, got {std!r}")
         if isinstance(mean, bool) or not isinstance(mean, (int, float)) or not math.isfinite(mean):
             raise ValueError(f"Variable {name!r}: mean must be a finite number, got {mean!r}")
+        from scipy.stats import norm
+
         z = float(norm.ppf(NORMAL_QUANTILE))
         u = f" {unit}" if unit else ""
         return cls(
