@@ -25,7 +25,7 @@ import numpy as np
 from .. import __version__
 from ..core.metrics import AbstractMetric
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
-from ..drives.protocol import AbstractDrive, AbstractStudyContext, Figure, StudyOutputs
+from ..drives.protocol import AbstractDrive, AbstractSinusoidalDrive, AbstractStudyContext, Figure, StudyOutputs
 from ..studies.errors import ErrorModel, ErrorSource
 from ..studies.laws import FixedPhase, Optimised
 from ..studies.montecarlo import PERCENTILES, TEStudy, as_key, default_block_size, monte_carlo, statistics
@@ -80,6 +80,15 @@ class _RunSample(equinox.Module):
         errors = self.study.errors.sample(key)
         response = self.study.drive.response(errors)
         return self.metric(self.study.drive, response), self.study.drive.sample_outputs(errors, response)
+
+    def batch(self, keys):
+        """The samples of `keys` at once (see `TEStudy.batch`): a sinusoidal drive's metric on the whole batch."""
+        drive = self.study.drive
+        if not isinstance(drive, AbstractSinusoidalDrive):
+            return jax.vmap(self)(keys)
+        errors = jax.vmap(self.study.errors.sample)(keys)
+        response = jax.vmap(drive.response)(errors)
+        return self.metric(drive, response), jax.vmap(drive.sample_outputs)(errors, response)
 
     def bytes_per_sample(self) -> int:
         return self.study.bytes_per_sample()
