@@ -39,6 +39,8 @@ test: lint
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_planetary_mc.py
+	$(BIN)/python benchmarks/bench_scaleout.py
+	$(BIN)/python benchmarks/bench_grid_drives.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache
