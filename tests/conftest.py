@@ -45,6 +45,9 @@ GROUPS = {
     "test_identify_cli": "identification",
     "test_montecarlo": "planetary",
     "test_planetary": "planetary",
+    "test_scaleout": "planetary",
+    "test_doe": "doe",
+    "test_doe_cli": "doe",
 }
 #: Notebook → the group of the tests of its subject (unlisted notebooks: group "notebooks").
 NOTEBOOK_GROUPS = {
@@ -61,7 +64,9 @@ COST_S = {
     "identification": 120,
     "harmonic": 130,
     "test_contract": 105,
-    "planetary": 45,
+    "test_helical": 70,
+    "doe": 45,
+    "planetary": 75,
     "test_metrics": 30,
     "test_fuzz_study_files": 25,
     "test_cli": 24,
