@@ -41,6 +41,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_planetary_mc.py
 	$(BIN)/python benchmarks/bench_scaleout.py
 	$(BIN)/python benchmarks/bench_grid_drives.py
+	$(BIN)/python benchmarks/bench_helical.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

@@ -109,6 +109,17 @@ def test_extrema_beats_of_near_equal_frequencies():
     np.testing.assert_allclose([float(e.max), float(e.min)], [ref_max, ref_min], rtol=1e-9)
 
 
+def test_extrema_under_a_large_offset_float32_grid_cannot_resolve():
+    # The grid is evaluated in float32 (ranking blocks only); its rounding bound enters the certificate. A constant
+    # offset 10⁷ times the oscillation puts the whole shape below float32's resolution: every block then stays
+    # uncertified until refined in float64, and the extrema are still exact.
+    amps, phases, freqs = [1.0, 1.0, 0.8, 1.0e7], [0.3, 1.1, 2.0, math.pi / 2], [3, 7, 21, 0]
+    e = gearte.extrema(make(amps, phases, freqs))
+    ref_max, ref_min = reference_extrema(amps, phases, freqs)
+    np.testing.assert_allclose(float(e.max) - 1.0e7, ref_max - 1.0e7, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(float(e.min) - 1.0e7, ref_min - 1.0e7, rtol=1e-8, atol=1e-8)
+
+
 def test_closed_forms():
     a, phi = 3.0, 0.7
     s = make([a], [phi], [Fraction(5, 3)])
