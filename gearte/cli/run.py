@@ -353,7 +353,8 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
         summary["study"]["source_rules"] = {n: s.phase.describe() for n, s in original.errors.sources.items() if s.phase is not None}
 
     commit_point()
-    extra = study.drive.study_outputs(RunContext(study, values_rad, outputs, progress)) if not streamed else StudyOutputs()
+    # A streamed study is a plain one (`_streams`): its drive has no study outputs of its own.
+    extra = StudyOutputs() if values_rad is None else study.drive.study_outputs(RunContext(study, values_rad, outputs, progress))
     commit_point()
     clash = set(extra.summary) & set(summary)
     if clash:
