@@ -160,9 +160,6 @@ def _cis_small(t: Array, terms: int = 10) -> tuple[Array, Array]:
     return c, t * s
 
 
-ROUNDING_ON = 1.0
-
-
 def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_steps: int) -> tuple[Array, Array]:
     """τ of the maximum and of the minimum of the signal over [0, 2π), certified.
 
@@ -212,7 +209,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     off2 = sgn * jnp.concatenate([off, off])
     u32 = float(np.finfo(np.float32).eps) / 2.0
     rounding = (2 * n_orders + 4) * 1.01 * u32 * (jnp.abs(off2) + jnp.sum(jnp.abs(a2) + jnp.abs(b2), axis=-1))
-    margin = h * h / 8.0 * jnp.sum(k * k * jnp.sqrt(a2**2 + b2**2), axis=-1) + rounding * ROUNDING_ON
+    margin = h * h / 8.0 * jnp.sum(k * k * jnp.sqrt(a2**2 + b2**2), axis=-1) + rounding
     c = min(candidates, nb)
     cos_pt, sin_pt = jnp.asarray(cos_tab.T), jnp.asarray(sin_tab.T)  # (m, K): cos kτᵢ, sin kτᵢ
     # cos kτ_s, sin kτ_s at the offsets s h, s = 0 … block + 1, of a block's window from its first point.
