@@ -775,3 +775,28 @@ def test_vectorised_contact_solve_matches_a_pin_by_pin_root_search(make):
                 assert bool(s.reachable[k, j]) == reach and bool(s.interference[k, j]) == interf
                 if reach and not interf:
                     assert abs(rot[j] - r_ref) < 1e-10, (k, j, rot[j], r_ref)
+
+
+def test_polynomial_sines_and_arctangent_agree_with_numpy():
+    """The solve's float64 kernels (`sincos`, `atan2`, and `_trig`'s unreduced series for the flank angles of
+    t ∈ [0, π] and a little beyond) against NumPy's library functions: a few units in the last place."""
+    from collections import namedtuple
+
+    from gearte.drives.cycloid_pin_solve import _T_MARGIN, _trig, atan2, sincos
+
+    sincos, atan2, trig = jax.jit(sincos), jax.jit(atan2), jax.jit(_trig, static_argnums=0)
+    Lobes = namedtuple("Lobes", "z_lobes z_pins")
+
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.uniform(-40.0, 40.0, 4000), np.arange(-8, 9) * (np.pi / 4), [0.0, 1e-300, 1e6 + 0.5]])
+    s, c = map(np.asarray, sincos(jnp.asarray(x)))
+    assert np.max(np.abs(s - np.sin(x))) < 4e-16 and np.max(np.abs(c - np.cos(x))) < 4e-16
+    y, z = rng.normal(size=4000) * 10.0 ** rng.uniform(-6, 3, 4000), rng.normal(size=4000)
+    y, z = np.concatenate([y, [0.0, 1.0, -1.0, 0.0]]), np.concatenate([z, [1.0, 0.0, 0.0, -1.0]])
+    assert np.max(np.abs(np.asarray(atan2(jnp.asarray(y), jnp.asarray(z))) - np.arctan2(y, z))) < 1e-15
+    t = np.linspace(-_T_MARGIN, np.pi + _T_MARGIN, 20001)
+    for za in (3, 4, 8, 9, 25, 39):  # short series where the ranges allow (z_a ≥ 9), `sincos` otherwise
+        got = np.asarray(trig(Lobes(za, za + 1), jnp.asarray(t)))
+        u, v = t / za, t * (za + 1) / za
+        want = np.stack([np.sin(u), np.cos(u), np.sin(v), np.cos(v)])
+        assert np.max(np.abs(got - want)) < 1.2e-15, za

@@ -26,17 +26,23 @@ and the rotation to contact is arg C + β_n + s m − arg(X + W) − (z_b/z_a) �
    (those of t* are shared by the batch), and the slope is that of the even part A² + B² − 2ABc, which
    stays finite at the folds t = 0 (a pin at the bottom of a tooth space) and t = π (at a tooth tip),
    where a Newton step in t fails.
-3. `T_STEPS` Newton steps in t with the exact derivative, kept within [0, π].
+3. `T_STEPS` steps to the increasing root of the local quadratic model of f in t (f, f′, f″ written out as jets:
+   the product and quotient rules applied by hand, `_locus`), kept within a bracket in [0, π].
 
 The result is checked, as before: a radius residual ||X + W| − ρ| below `RESIDUAL_TOL_MM` counts as
-converged (reported per pin). `tests/test_cycloid.py` holds the solve to 1e-9 mm against an independent
+converged (reported per pin). `tests/test_cycloid.py` holds the solve to 1e-10 rad against an independent
 per-pin, per-angle root search, over Monte Carlo reducers of the examples.
 
-**Sines and cosines** are evaluated by `sincos` and `atan2` below: float64 polynomial kernels (Cody-Waite
-reduction to [−π/4, π/4], Taylor series to the 17th/18th power; two argument halvings and an odd series
-for the arctangent), which vectorise where XLA's float64 `sin`, `cos` and `atan2` on CPU are scalar
-library calls; both are accurate to a few units in the last place on the angles used here (tested
-against NumPy).
+**Sines and cosines** are float64 polynomials, which vectorise where XLA's float64 `sin`, `cos` and `atan2` on
+CPU are scalar library calls. `sincos` and `atan2` below take any argument (Cody-Waite reduction to [−π/4, π/4],
+Taylor series to the 17th/18th power; two argument halvings and an odd series for the arctangent); the flank
+angles u = t/z_a and v = z_b t/z_a of the solve, with t in [0, π], need no reduction (`_trig`: the series of u,
+and of r = (v − π/2)/2, |r| < 1 rad, from which sin v = cos 2r and cos v = −sin 2r). All are accurate to a few
+units in the last place on the angles used here (tested against NumPy).
+
+**Stored stages.** XLA on CPU fuses elementwise producers into every consumer, so a stage read by several later
+ones would be recomputed in each; `materialise` stores the few arrays each stage hands on (through a loop of
+zero trips, which XLA does not fuse into).
 
 The gradient with respect to the errors and the modification is the implicit one: the iteration is not
 differentiated, the final evaluation is, and dt = −(∂f/∂p)/(∂f/∂t) dp enters through a term that is zero
@@ -131,10 +137,18 @@ def _atan2_jvp(primals, tangents):
     return atan2(y, x), (x * dy - y * dx) / jnp.where(r2 > 0, r2, 1.0)
 
 
-def _materialise_one(x):
-    if not (eqx.is_array(x) and jnp.issubdtype(x.dtype, jnp.floating)):
-        return x
-    return jnp.max(jnp.stack([x, jnp.full_like(x, -jnp.inf)]), axis=0)
+@jax.custom_jvp
+def _stored(arrays: tuple[Array, ...]) -> tuple[Array, ...]:
+    v = arrays[0].reshape(-1)[0]
+    trips = (v != v).astype(jnp.int32)  # 0 for every finite or infinite value; 1 for NaN (the body is the identity)
+    # (The body adds 0 × i, not provably 0 for floats, so XLA keeps the loop rather than forwarding the operands.)
+    return jax.lax.fori_loop(0, trips, lambda i, c: tuple(x + i.astype(x.dtype) * 0.0 for x in c), arrays)
+
+
+@_stored.defjvp
+def _stored_jvp(primals, tangents):
+    # The identity: tangents pass unchanged (a loop of unknown trip count could not be transposed for gradients).
+    return _stored(*primals), tangents[0]
 
 
 def materialise(tree):
@@ -142,10 +156,18 @@ def materialise(tree):
 
     XLA on CPU fuses elementwise producers into every consumer and drops optimisation barriers before fusion, so
     a value computed per reducer (or per angle) and broadcast to every pin at every angle, or a stage of the solve
-    read by several later ones, would be recomputed in each of them, per element. A reduction is never duplicated
-    into its consumers: the maximum with −∞ is the identity and makes the value a stored array.
+    read by several later ones, would be recomputed in each of them, per element. The operands of a loop are never
+    fused into it: the floating-point arrays of `tree` pass through a `fori_loop` whose trip count is 0 (NaN ≠ NaN
+    decides it, which XLA cannot know before the run), the identity at the cost of storing them once.
     """
-    return jax.tree.map(_materialise_one, tree)
+    leaves, treedef = jax.tree.flatten(tree)
+    idx = [i for i, x in enumerate(leaves) if eqx.is_array(x) and jnp.issubdtype(x.dtype, jnp.floating)]
+    if not idx:
+        return tree
+    arrays = _stored(tuple(leaves[i] for i in idx))
+    for i, x in zip(idx, arrays, strict=True):
+        leaves[i] = x
+    return jax.tree.unflatten(treedef, leaves)
 
 
 # ---------------------------------------------------------------- the geometry of one pin's solve
@@ -234,48 +256,138 @@ def _geometry(drive: CycloidPin, err: CycloidErrors, pins: PinLayout, theta_T) -
     )
 
 
+def _series_sincos(x, bound: float):
+    """(sin x, cos x) by their Taylor series about 0, no argument reduction, for |x| ≤ `bound` ≤ 1 (rad): as many
+    terms as keep the first one left out below 1e-18 there (decided when tracing)."""
+    k = 1
+    while k < len(_SIN) and bound ** (2 * k + 3) / math.factorial(2 * k + 3) > 1e-18 * bound:
+        k += 1
+    z = x * x
+    return x + x * z * _horner(z, _SIN[:k]), 1.0 - 0.5 * z + z * z * _horner(z, _COS[:k])
+
+
+#: The solve's flank parameters t lie in [0, π] (bracketed steps; a step below 1e-6 rad may leave the bracket by
+#: that much): `_trig` is exact to rounding on this slightly wider interval.
+_T_MARGIN = 0.01
+
+
 def _trig(drive: CycloidPin, t):
-    """sin and cos of u = t/z_a and v = z_b t/z_a (the wheel curve's two angles)."""
-    su, cu = sincos(t / float(drive.z_lobes))
-    sv, cv = sincos(t * (float(drive.z_pins) / float(drive.z_lobes)))
-    return su, cu, sv, cv
+    """sin and cos of u = t/z_a and v = z_b t/z_a (the wheel curve's two angles) for t in [0, π] ± `_T_MARGIN`.
+
+    u is small (|u| ≤ (π + margin)/z_a): its series needs no argument reduction. v = π/2 + 2r with
+    |r| ≤ ((π + margin) z_b/z_a − π/2)/2 (below 1 rad for z_a ≥ 9): sin v = cos 2r = (cos r − sin r)(cos r + sin r),
+    cos v = −sin 2r, from the series of r. Where a range exceeds 1 rad (few lobes), `sincos` instead."""
+    za, zb = float(drive.z_lobes), float(drive.z_pins)
+    top = math.pi + _T_MARGIN
+    bu, br = top / za, 0.5 * (top * zb / za - 0.5 * math.pi)
+    su, cu = _series_sincos(t / za, bu) if bu <= 1.0 else sincos(t / za)
+    if br > 1.0:
+        sv, cv = sincos(t * (zb / za))
+        return su, cu, sv, cv
+    sr, cr = _series_sincos(0.5 * (t * (zb / za) - 0.5 * math.pi), br)
+    return su, cu, (cr - sr) * (cr + sr), -2.0 * sr * cr
 
 
-def _shifted(drive: CycloidPin, trig, h):
-    """`_trig` at t + h from its (stored) values at t, by angle addition: derivatives in h at h = 0 cost no new sines."""
-    su, cu, sv, cv = trig
-    sh, ch = sincos(h / float(drive.z_lobes))
-    sk, ck = sincos(h * (float(drive.z_pins) / float(drive.z_lobes)))
-    return su * ch + cu * sh, cu * ch - su * sh, sv * ck + cv * sk, cv * ck - sv * sk
+# Jets: a value and its first `order` derivatives in t, (f, f′) or (f, f′, f″), as tuples of arrays; the derivatives
+# of the locus are written out (product and quotient rules on these), not traced by nested `jax.jvp`, which would
+# carry every zero and repeated term of the angle-addition form through every stage.
 
 
-def _locus(drive: CycloidPin, g: _Geo, t, trig=None):
-    """X(s t) + W (mm, in the wheel's frame): the pin-centre locus of the placed flank half, before its rotations.
-    `trig`: `_trig(drive, t)` when already computed."""
-    zb = drive.z_pins
-    za = drive.z_lobes
+def _zero(x) -> bool:
+    return isinstance(x, float) and x == 0.0
+
+
+def _mul(x, y):
+    return 0.0 if _zero(x) or _zero(y) else x * y
+
+
+def _add(*xs):
+    xs = [x for x in xs if not _zero(x)]
+    return sum(xs[1:], xs[0]) if xs else 0.0
+
+
+def _jmul(a, b):
+    out = (a[0] * b[0],)
+    if len(a) > 1:
+        out += (_add(_mul(a[0], b[1]), _mul(a[1], b[0])),)
+    if len(a) > 2:
+        out += (_add(_mul(a[0], b[2]), _mul(2.0 * a[1], b[1]) if not _zero(a[1]) else 0.0, _mul(a[2], b[0])),)
+    return out
+
+
+def _jdiv(a, b):
+    """a/b of jets whose divisor b has nonzero derivatives."""
+    q0 = a[0] / b[0]
+    if len(a) == 1:
+        return (q0,)
+    q1 = (a[1] - q0 * b[1]) / b[0]
+    if len(a) == 2:
+        return q0, q1
+    return q0, q1, (a[2] - 2.0 * q1 * b[1] - q0 * b[2]) / b[0]
+
+
+def _jlin(*terms):
+    """Σ c_k a_k of jets a_k with coefficients c_k (arrays broadcast against the jets, or floats); terms that are
+    a Python 0 are left out and coefficients ±1 not multiplied, so that no operation is traced for them."""
+
+    def coef(i):
+        acc = None
+        for c, a in terms:
+            x = a[i]
+            if isinstance(x, float) and x == 0.0:
+                continue
+            neg = isinstance(c, float) and c == -1.0
+            if not (isinstance(c, float) and abs(c) == 1.0):
+                x = c * x
+            acc = (-x if neg else x) if acc is None else (acc - x if neg else acc + x)
+        return 0.0 if acc is None else acc
+
+    return tuple(coef(i) for i in range(len(terms[0][1])))
+
+
+def _locus(drive: CycloidPin, g: _Geo, trig, order: int = 0):
+    """X(s t) + W (mm, in the wheel's frame) as jets in t of `order` 0, 1 or 2: the pin-centre locus of the placed
+    flank half, before its rotations. `trig`: `_trig(drive, t)`."""
+    zb, za = drive.z_pins, drive.z_lobes
     RZ, a = drive.wheel_pin_circle_radius, drive.eccentricity
     K = a * float(zb) / RZ
-    su, cu, sv, cv = _trig(drive, t) if trig is None else trig
-    su, sv = g.side * su, g.side * sv  # φ = s t
-    cphi = cu * cv + su * sv  # cos(v − u) = cos φ
+    s = g.side
+    su, cu, sv, cv = trig
+    su, sv = s * su, s * sv  # φ = s t
+    cphi = cu * cv + su * sv  # cos(v − u) = cos φ = cos t
+    sphi = sv * cu - cv * su  # sin φ = s sin t
     S = jnp.sqrt(1.0 + K * K - 2.0 * K * cphi)
-    d = g.d
+    wu, wv = 1.0 / za, float(zb) / za
+    n = order + 1
+    Su = (su, s * wu * cu, -wu * wu * su)[:n]
+    Cu = (cu, -s * wu * su, -wu * wu * cu)[:n]
+    Sv = (sv, s * wv * cv, -wv * wv * sv)[:n]
+    Cv = (cv, -s * wv * sv, -wv * wv * cv)[:n]
+    Cp = (cphi, -s * sphi, -cphi)[:n]
+    Sp = (sphi, s * cphi, -sphi)[:n]
+    S1 = K * s * sphi / S  # S′ (traced only where used)
+    Sj = (S, S1, (K * cphi - S1 * S1) / S)[:n]
+    one = (1.0,) + (0.0,) * order
+    d = (g.d,) + (0.0,) * order
     if g.gen is not None:  # the generated flank's normal deviation e_n(φ) (gearte.drives.cycloid_pin_grinding)
         e = g.gen
-        sphi = sv * cu - cv * su
-        eps_c = e.chain_cos * sphi + e.chain_sin * cphi
-        delta_p = e.pitch * (e.pitch_sin * cu + e.pitch_cos * su - e.pitch_sin)
-        num = e.slide * (1.0 - K * cphi) - e.across * K * sphi - e.crank * (cphi - K) - a * (eps_c + delta_p * za) * sphi
-        d = d - (num / S - e.wheel)
-    x = RZ * su - a * sv - d * (su - K * sv) / S
-    y = RZ * cu - a * cv - d * (cu - K * cv) / S
-    return x + g.wx, y + g.wy
+        eps_c = _jlin((e.chain_cos, Sp), (e.chain_sin, Cp))
+        delta_p = _jlin((e.pitch * e.pitch_sin, Cu), (e.pitch * e.pitch_cos, Su), (-e.pitch * e.pitch_sin, one))
+        inner = _jlin((a, eps_c), (a * za, delta_p))
+        num = _jlin((e.slide - e.crank * (-K), one), (-(e.slide * K + e.crank), Cp), (-e.across * K, Sp))
+        num = _jlin((1.0, num), (-1.0, _jmul(inner, Sp)))
+        dn = _jdiv(num, Sj)
+        d = (g.d - dn[0] + e.wheel,) + tuple(-x for x in dn[1:])
+    x = _jlin((RZ, Su), (-a, Sv), (-1.0, _jmul(d, _jdiv(_jlin((1.0, Su), (-K, Sv)), Sj))))
+    y = _jlin((RZ, Cu), (-a, Cv), (-1.0, _jmul(d, _jdiv(_jlin((1.0, Cu), (-K, Cv)), Sj))))
+    return (x[0] + g.wx,) + x[1:], (y[0] + g.wy,) + y[1:]
 
 
-def _f(drive, g, t, trig=None):
-    x, y = _locus(drive, g, t, trig)
-    return x * x + y * y - g.rho2
+def _f(drive, g, trig, order: int = 0):
+    """f = |X + W|² − ρ² as a jet of `order`."""
+    x, y = _locus(drive, g, trig, order)
+    f = _jlin((1.0, _jmul(x, x)), (1.0, _jmul(y, y)))
+    return (f[0] - g.rho2,) + f[1:]
 
 
 def _even(drive, d, c):
@@ -324,15 +436,15 @@ def contacts(drive: CycloidPin, err: CycloidErrors, pins: PinLayout, theta_T) ->
     bar = materialise
     # Angles shared by a batch of reducers (0, π, the error-free contact): their sines and cosines once.
     zero, pi = jnp.zeros_like(ones), jnp.full_like(ones, math.pi)
-    interference = _f(ds, gs, zero, bar(_trig(ds, zero))) > 0.0
-    reachable = _f(ds, gs, pi, bar(_trig(ds, pi))) >= 0.0
+    interference = _f(ds, gs, bar(_trig(ds, zero)))[0] > 0.0
+    reachable = _f(ds, gs, bar(_trig(ds, pi)))[0] >= 0.0
 
     # 1. The error-free contact (shared by a batch of reducers), 2. one chord step in c with this reducer's errors.
     c0 = nominal_cosine(drive, pins)
     s0 = jnp.sqrt(jnp.maximum(1.0 - c0 * c0, 0.0))
     t0 = atan2(s0, c0)
     c0, t0, trig0 = bar((c0, t0, _trig(ds, t0)))
-    f0 = _f(ds, gs, t0, trig0)
+    f0 = _f(ds, gs, trig0)[0]
     slope = jax.jvp(lambda c: _even(ds, gs.d, c), (c0,), (ones,))[1]
     c1 = jnp.clip(c0 - f0 / jnp.where(slope < 0, slope, -1.0), -1.0, 1.0)
     t = atan2(jnp.sqrt(jnp.maximum(1.0 - c1 * c1, 0.0)), c1)
@@ -342,11 +454,9 @@ def contacts(drive: CycloidPin, err: CycloidErrors, pins: PinLayout, theta_T) ->
     # 3. Steps to the increasing root of the local quadratic model of f (Newton's step with the curvature: it
     #    stays well defined at a fold, where f′ → 0), within the bracket; bisection when it leaves it.
     for _ in range(T_STEPS):
-        # f, f′, f″ at t: the sines once (stored), the derivatives by angle addition about them.
+        # f, f′, f″ at t: the sines once (stored), the derivatives written out.
         trig = bar(_trig(ds, t))
-        f1 = lambda h, trig=trig: jax.jvp(lambda h: _f(ds, gs, None, _shifted(ds, trig, h)), (h,), (ones,))
-        (val, d1), (_, d2) = jax.jvp(f1, (zero,), (ones,))
-        val, d1, d2 = bar((val, d1, d2))
+        val, d1, d2 = bar(_f(ds, gs, trig, 2))
         lo = jnp.where(val <= 0, jnp.maximum(lo, t), lo)
         hi = jnp.where(val > 0, jnp.minimum(hi, t), hi)
         disc = d1 * d1 - 2.0 * val * d2
@@ -364,7 +474,7 @@ def contacts(drive: CycloidPin, err: CycloidErrors, pins: PinLayout, theta_T) ->
 
     # The final evaluation is differentiated; t enters with its implicit derivative (zero in value).
     trig = bar(_trig(ds, t))
-    (x, y), (xt, yt) = jax.jvp(lambda h: _locus(drive, g, None, _shifted(drive, trig, h)), (zero,), (ones,))
+    (x, xt), (y, yt) = _locus(drive, g, trig, 1)
     x, y, xt, yt = bar((x, y, xt, yt))
     r2 = x * x + y * y
     f = r2 - g.rho2
