@@ -47,7 +47,7 @@ def response():
 def test_geometry_matches_iso21771_by_hand_and_the_file_uses_iso6336_stiffness(model):
     st = model.stage
     g = geometry(st)
-    mn, b = 10.0, math.radians(7.5)
+    mn, b = 10.0, math.radians(11.5)  # the example's helix angle
     mt = mn / math.cos(b)
     at = math.atan(math.tan(math.radians(20)) / math.cos(b))
     d = np.array([21, 39, 99]) * mt
