@@ -268,6 +268,9 @@ class _Counter:
         self.n += 1
 
 
+_EVALUATIONS = _Counter()  # one object, so that the compiled solve is reused from call to call
+
+
 class _BoxObjective(eqx.Module):
     centre: Float[Array, " 4"]
     half: Float[Array, " 4"]
@@ -333,7 +336,8 @@ def optimise_modifications(
     centre = 0.5 * (box[:, 0] + box[:, 1])
     half = 0.5 * (box[:, 1] - box[:, 0])
     z0 = np.where(half > 0, np.arcsin(np.clip((x - centre) / np.where(half > 0, half, 1.0), -1.0, 1.0)), 0.0)
-    counter = _Counter()
+    counter = _EVALUATIONS
+    counter.n = 0
     fn = _BoxObjective(jnp.asarray(centre), jnp.asarray(half), jnp.asarray(w), float(smooth), counter)
     sol = optx.minimise(fn, optx.BFGS(rtol=rtol, atol=atol), jnp.asarray(z0), args=model, max_steps=max_steps, throw=False)
     jax.block_until_ready(sol.value)
