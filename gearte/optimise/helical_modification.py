@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import equinox as eqx
 import jax
@@ -35,6 +35,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from ..core.solution import RESULTS, check, promote
+from ..core.validate import as_int
 from ..drives.helical import HelicalPlanetary
 from ..drives.helical_geometry import geometry
 from ..drives.helical_modifications import recommended_tip_relief
@@ -247,7 +248,8 @@ class ModificationSolution(eqx.Module):
     - `fluctuation`: (external, internal) sampled peak-to-peak fluctuations at `amounts`, µm (a direct run).
     - `result`: a `gearte.RESULTS` item; `num_steps`: BFGS steps.
     - `evaluations`: objective-and-gradient evaluations, each one ODE solve with its reverse-mode adjoint
-      (≈ 3 forward solves), counted as they ran.
+      (≈ 3 forward solves): optimistix's BFGS makes one per step (`jax.linearize` of the objective at the
+      step's point), so this is `num_steps`.
     """
 
     amounts: Float[Array, " 4"]
@@ -258,30 +260,54 @@ class ModificationSolution(eqx.Module):
     evaluations: int
 
 
-class _Counter:
-    def __init__(self):
-        self.n = 0
-
-    def __call__(self, *_):
-        self.n += 1
-
-
-_EVALUATIONS = _Counter()  # one object, so that the compiled solve is reused from call to call
-
-
 class _BoxObjective(eqx.Module):
     centre: Float[Array, " 4"]
     half: Float[Array, " 4"]
     weights: Float[Array, " 2"]
     smooth: float = eqx.field(static=True)
-    counter: _Counter = eqx.field(static=True)
 
     def amounts(self, z):
         return self.centre + self.half * jnp.sin(z)
 
     def __call__(self, z, model):
-        jax.debug.callback(self.counter)
         return self.weights @ model.fluctuation(self.amounts(z), smooth=self.smooth)
+
+
+class _StepLimit(optx.AbstractMinimiser):
+    """`solver` stopped after `max_steps` steps, a run-time value: one compiled solve serves every limit up
+    to the static loop bound given to `optx.minimise` (`_loop_bound`)."""
+
+    solver: optx.AbstractMinimiser
+    max_steps: Array
+    rtol: float
+    atol: float
+    norm: Callable = eqx.field(static=True)
+
+    def __init__(self, solver, max_steps: int):
+        self.solver, self.max_steps = solver, jnp.asarray(max_steps)
+        self.rtol, self.atol, self.norm = solver.rtol, solver.atol, solver.norm
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        return self.solver.init(fn, y, args, options, f_struct, aux_struct, tags), jnp.asarray(0)
+
+    def step(self, fn, y, args, options, state, tags):
+        inner, k = state
+        y, inner, aux = self.solver.step(fn, y, args, options, inner, tags)
+        return y, (inner, k + 1), aux
+
+    def terminate(self, fn, y, args, options, state, tags):
+        inner, k = state
+        done, result = self.solver.terminate(fn, y, args, options, inner, tags)
+        capped = jnp.invert(done) & (k >= self.max_steps)
+        return done | capped, optx.RESULTS.where(capped, optx.RESULTS.nonlinear_max_steps_reached, result)
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        return self.solver.postprocess(fn, y, aux, args, options, state[0], tags, result)
+
+
+def _loop_bound(max_steps: int) -> int:
+    """The static bound of the optimiser's loop: `max_steps` rounded up to a power of two, at least 64."""
+    return max(64, 1 << (max_steps - 1).bit_length())
 
 
 def optimise_modifications(
@@ -312,7 +338,8 @@ def optimise_modifications(
     - `weights`: (w_ext, w_int).
     - `smooth`: width of `smooth_peak_to_peak`, µm (the objective is at most 2·smooth·log S above the sampled one).
     - `rtol`, `atol`: BFGS's Cauchy termination on z and on the objective (µm).
-    - `max_steps`: BFGS steps at most.
+    - `max_steps`: BFGS steps at most (a run-time value: up to 64, and within each power of two beyond, a new
+      limit reuses the compiled solve).
     - `throw`: raise if the solve did not succeed (else inspect `result`).
 
     **Returns:** a `ModificationSolution`.
@@ -331,19 +358,19 @@ def optimise_modifications(
         raise ValueError(f"weights: (w_ext, w_int), ≥ 0, not both 0; got {weights!r}")
     if not (math.isfinite(smooth) and smooth > 0):
         raise ValueError(f"smooth: a width > 0 µm, got {smooth!r}")
+    max_steps = as_int("max_steps", max_steps, minimum=1)
     centre = 0.5 * (box[:, 0] + box[:, 1])
     half = 0.5 * (box[:, 1] - box[:, 0])
     z0 = np.where(half > 0, np.arcsin(np.clip((x - centre) / np.where(half > 0, half, 1.0), -1.0, 1.0)), 0.0)
-    counter = _EVALUATIONS
-    counter.n = 0
-    fn = _BoxObjective(jnp.asarray(centre), jnp.asarray(half), jnp.asarray(w), float(smooth), counter)
-    sol = optx.minimise(fn, optx.BFGS(rtol=rtol, atol=atol), jnp.asarray(z0), args=model, max_steps=max_steps, throw=False)
-    jax.block_until_ready(sol.value)
+    fn = _BoxObjective(jnp.asarray(centre), jnp.asarray(half), jnp.asarray(w), float(smooth))
+    solver = _StepLimit(optx.BFGS(rtol=rtol, atol=atol), max_steps)
+    sol = optx.minimise(fn, solver, jnp.asarray(z0), args=model, max_steps=_loop_bound(max_steps), throw=False)
     amounts = fn.amounts(sol.value)
     value = _smooth_objective(model, amounts, jnp.asarray(w), float(smooth))
     fluct = _fluctuation(model, amounts)
     result = promote(sol.result)
-    out = ModificationSolution(amounts, value, fluct, result, int(sol.stats["num_steps"]), counter.n)
+    steps = int(sol.stats["num_steps"])
+    out = ModificationSolution(amounts, value, fluct, result, steps, steps)
     check(result, throw=throw, what="optimise_modifications")
     return out
 
