@@ -45,6 +45,8 @@ GROUPS = {
     "test_identify_cli": "identification",
     "test_montecarlo": "planetary",
     "test_planetary": "planetary",
+    "test_helical": "helical",
+    "test_helical_modification": "helical",
 }
 #: Notebook → the group of the tests of its subject (unlisted notebooks: group "notebooks").
 NOTEBOOK_GROUPS = {
@@ -53,6 +55,7 @@ NOTEBOOK_GROUPS = {
     "tolerance_allocation.ipynb": "planetary_optimise",
     "identify_and_assemble.ipynb": "identification",
     "planetary_wang2013.ipynb": "planetary",
+    "helical_modification.ipynb": "helical",
 }
 #: Rough cost of each group (s, one worker, empty compilation cache): only their order matters.
 COST_S = {
@@ -60,6 +63,7 @@ COST_S = {
     "planetary_optimise": 225,
     "identification": 120,
     "harmonic": 130,
+    "helical": 130,
     "test_contract": 105,
     "planetary": 45,
     "test_metrics": 30,
