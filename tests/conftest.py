@@ -48,6 +48,8 @@ GROUPS = {
     "test_scaleout": "planetary",
     "test_doe": "doe",
     "test_doe_cli": "doe",
+    "test_helical": "helical",
+    "test_helical_modification": "helical",
 }
 #: Notebook → the group of the tests of its subject (unlisted notebooks: group "notebooks").
 NOTEBOOK_GROUPS = {
@@ -56,6 +58,7 @@ NOTEBOOK_GROUPS = {
     "tolerance_allocation.ipynb": "planetary_optimise",
     "identify_and_assemble.ipynb": "identification",
     "planetary_wang2013.ipynb": "planetary",
+    "helical_modification.ipynb": "helical",
 }
 #: Rough cost of each group (s, one worker, empty compilation cache): only their order matters.
 COST_S = {
@@ -63,8 +66,8 @@ COST_S = {
     "planetary_optimise": 225,
     "identification": 120,
     "harmonic": 130,
+    "helical": 130,
     "test_contract": 105,
-    "test_helical": 70,
     "doe": 45,
     "planetary": 75,
     "test_metrics": 30,

@@ -1,7 +1,9 @@
 """Helical planetary dynamic model: geometry, mesh stiffness, modifications, errors, solver, gradients.
 
-The stage is the wind-turbine parameter set (examples/dynamics/helical_wind_turbine.toml) with 4 slices
-and 8 mesh periods, compiled once per module (the solve takes ~0.2 s after compilation).
+The stage is the wind-turbine parameter set (examples/dynamics/helical_wind_turbine.toml) reduced to 4 slices,
+4 mesh periods and 32 samples per period, the model of tests/test_helical_modification.py and of the notebook
+at its small size: they run on one worker (conftest.py) and share the compiled solves (`_fluctuation`,
+`_smooth_objective`); a solve takes ~0.07 s once compiled.
 """
 
 import math
@@ -21,19 +23,16 @@ from gearte.drives.helical_solve import PeriodicSolver, solve_periodic
 from gearte.drives.helical_stiffness import SlicedMeshes, pair_range
 from gearte.drives.planetary_2kh import Planetary2KH
 from gearte.drives.protocol import Eccentricity
+from gearte.optimise.helical_modification import _fluctuation, _smooth_objective
 
-SOLVER = PeriodicSolver(8, steps_per_period=256, samples_per_period=64)
+#: The reduced solver of the helical tests and of the notebook at its small size (one compiled solve for all).
+SOLVER = PeriodicSolver(4, steps_per_period=256, samples_per_period=32)
 
 
 @pytest.fixture(scope="module")
 def model():
     base = load_helical(EXAMPLE)
     return HelicalPlanetary(base.stage, n_slices=4, solver=SOLVER)
-
-
-@pytest.fixture(scope="module")
-def fluctuation():
-    return eqx.filter_jit(lambda m, x, smooth: m.fluctuation(x, smooth=smooth))
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +46,7 @@ def response():
 def test_geometry_matches_iso21771_by_hand_and_the_file_uses_iso6336_stiffness(model):
     st = model.stage
     g = geometry(st)
-    mn, b = 10.0, math.radians(7.5)
+    mn, b = 10.0, math.radians(11.5)  # the example's helix angle
     mt = mn / math.cos(b)
     at = math.atan(math.tan(math.radians(20)) / math.cos(b))
     d = np.array([21, 39, 99]) * mt
@@ -228,24 +227,26 @@ def test_slow_speed_is_the_quasi_static_load_sharing_solution(model):
     np.testing.assert_allclose(r.mesh_force, f_mesh.T, rtol=5e-3)
 
 
-def test_gradient_of_the_fluctuation_matches_float64_finite_differences(model, fluctuation):
+def test_gradient_of_the_fluctuation_matches_float64_finite_differences(model):
     """Reverse mode through diffrax (RecursiveCheckpointAdjoint) on the smooth peak-to-peak, against central
-    differences of the same float64 computation along two directions that mix all four amounts."""
+    differences of the same float64 computation (the optimiser's objective, `_smooth_objective`) along two
+    directions that mix all four amounts."""
     x = jnp.asarray([20.0, 10.0, 20.0, 10.0])
-    grad = eqx.filter_jit(jax.grad(lambda x, m: jnp.sum(m.fluctuation(x, smooth=0.05))))(x, model)
+    ones = jnp.asarray([1.0, 1.0])
+    grad = eqx.filter_jit(jax.grad(lambda x, m: jnp.sum(m.fluctuation(x, smooth=0.02))))(x, model)
     assert bool(jnp.all(jnp.isfinite(grad))) and float(jnp.max(jnp.abs(grad))) > 1e-2  # the amounts matter
     h = 1e-3
     for v in (jnp.asarray([1.0, -0.5, 0.3, 0.8]), jnp.asarray([-0.2, 0.9, 1.0, -0.6])):
-        fd = (jnp.sum(fluctuation(model, x + h * v, 0.05)) - jnp.sum(fluctuation(model, x - h * v, 0.05))) / (2 * h)
+        fd = (_smooth_objective(model, x + h * v, ones, 0.02) - _smooth_objective(model, x - h * v, ones, 0.02)) / (2 * h)
         np.testing.assert_allclose(grad @ v, fd, rtol=1e-6, atol=1e-8)
 
 
-def test_vmap_over_amounts_and_planet_rotation_symmetry(model, fluctuation):
+def test_vmap_over_amounts_and_planet_rotation_symmetry(model):
     xs = jnp.asarray([[0.0, 0.0, 0.0, 0.0], [30.0, 20.0, 10.0, 40.0]])
-    batched = eqx.filter_jit(jax.vmap(lambda x, m: m.fluctuation(x, smooth=0.05), in_axes=(0, None)))(xs, model)
-    one = jnp.stack([fluctuation(model, x, 0.05) for x in xs])
+    batched = eqx.filter_jit(jax.vmap(lambda x, m: m.fluctuation(x), in_axes=(0, None)))(xs, model)
+    one = jnp.stack([_fluctuation(model, x) for x in xs])
     np.testing.assert_allclose(batched, one, rtol=1e-10)
     assert not np.allclose(one[0], one[1], rtol=1e-3)
     # Turning the whole stage (isotropic supports, no gravity) changes nothing.
     turned = eqx.tree_at(lambda m: m.stage.planet_angles, model, model.stage.planet_angles + 0.4)
-    np.testing.assert_allclose(fluctuation(turned, xs[1], 0.05), one[1], rtol=1e-8)
+    np.testing.assert_allclose(_fluctuation(turned, xs[1]), one[1], rtol=1e-8)

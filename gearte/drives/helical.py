@@ -229,6 +229,10 @@ def load_helical(path: str | Path) -> HelicalPlanetary:
         mesh_damping_ratio=_num(mesh, "damping_ratio", w),
         carrier_torque=_num(op, "power_kw", w) * 1e3 / (_num(op, "carrier_speed_rpm", w) * 2 * math.pi / 60),
         carrier_speed=_num(op, "carrier_speed_rpm", w),
+        lead_mismatch=[
+            _num(mesh, "lead_mismatch_external_um", w) if "lead_mismatch_external_um" in mesh else 0.0,
+            _num(mesh, "lead_mismatch_internal_um", w) if "lead_mismatch_internal_um" in mesh else 0.0,
+        ],
     )
     solver = PeriodicSolver(
         int(model.get("n_periods", 20)),

@@ -77,6 +77,11 @@ class HelicalStage(eqx.Module):
       external (sun–planet) and internal (planet–ring), shape (2,).
     - `mesh_damping_ratio`: ζ of the meshes, shape (2,) or a number.
     - `carrier_torque`: input torque, N·m; `carrier_speed`: input speed, rpm.
+    - `lead_mismatch`: F_βy, µm, external and internal, shape (2,) or a number: the effective
+      helix-slope mismatch of each mesh under load after running-in (ISO 6336-1 F_βy: helix slope
+      deviations plus the misalignment of the gear axes and their deflection), a gap that grows
+      linearly across the face, + F_βy/2 at one end and − F_βy/2 at the other (`lead_mismatch_gap`).
+      0 by default (ideal leads).
     """
 
     z_sun: int = eqx.field(static=True)
@@ -98,6 +103,7 @@ class HelicalStage(eqx.Module):
     mesh_damping_ratio: Float[Array, " 2"]
     carrier_torque: Float[Array, ""]
     carrier_speed: Float[Array, ""]
+    lead_mismatch: Float[Array, " 2"]
 
     def __init__(
         self,
@@ -121,6 +127,7 @@ class HelicalStage(eqx.Module):
         mesh_damping_ratio: Any = 0.07,
         carrier_torque: float,
         carrier_speed: float,
+        lead_mismatch: Any = 0.0,
     ):
         zs = as_int("z_sun", z_sun, minimum=6)
         zp = as_int("z_planet", z_planet, minimum=6)
@@ -164,6 +171,7 @@ class HelicalStage(eqx.Module):
         self.mesh_damping_ratio = _array("mesh_damping_ratio", mesh_damping_ratio, (2,), nonnegative=True)
         self.carrier_torque = jnp.asarray(as_float("carrier_torque", carrier_torque, hint="N·m"))
         self.carrier_speed = jnp.asarray(as_float("carrier_speed", carrier_speed, positive=True, hint="rpm"))
+        self.lead_mismatch = _array("lead_mismatch", lead_mismatch, (2,), nonnegative=True, unit="µm")
 
     @property
     def n_dof(self) -> int:
@@ -270,3 +278,22 @@ def iso6336_mesh_stiffness(stage: HelicalStage) -> tuple[Float[Array, " 2"], Flo
     q_int = 0.04723 + 0.15551 / zn[1]
     c_single = 0.8 * jnp.cos(beta) / jnp.stack([q_ext, q_int])
     return c_single, c_single * (0.75 * geom.contact_ratio + 0.25)
+
+
+def lead_mismatch_gap(lead_mismatch, z, face_width):
+    """Gap excitation (µm, added to the compression) of a lead mismatch F_βy at `z` mm from mid face:
+    F_βy z / b, linear across the face from −F_βy/2 to +F_βy/2 (the flanks first touch at the + end)."""
+    return lead_mismatch * z / face_width
+
+
+def iso6336_lead_mismatch(*, f_ma: float, f_sh: float = 0.0, case_hardened: bool = True) -> float:
+    """Effective helix-slope mismatch F_βy, µm, of ISO 6336-1 (the K_Hβ initial equivalent misalignment):
+    F_βx = 1.33 f_sh + f_ma (f_sh: mismatch from the deformation of shafts and gear bodies under load,
+    f_ma: manufacturing and assembly mismatch, µm), less the running-in allowance y_β: 0.15 F_βx, at
+    most 6 µm, for case-hardened gears; 0.15 F_βx without the limit otherwise (σ_Hlim ≈ 2100 N/mm²)."""
+    for name, v in (("f_ma", f_ma), ("f_sh", f_sh)):
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"iso6336_lead_mismatch: {name} must be ≥ 0 µm, got {v!r}")
+    f_bx = 1.33 * f_sh + f_ma
+    y_b = min(0.15 * f_bx, 6.0) if case_hardened else 0.15 * f_bx
+    return f_bx - y_b

@@ -24,6 +24,7 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from ..core.validate import as_int
@@ -73,24 +74,38 @@ def solve_periodic(system: MeshedSystem, solver: PeriodicSolver, *, y0: Float[Ar
         y0 = jnp.concatenate([system.static(jnp.asarray(0.0)), jnp.zeros(d)])
     n, rec, s = solver.n_periods, solver.record_periods, solver.samples_per_period
     t_start = float(n - rec)
-    ts = t_start + jnp.arange(rec * s + 1, dtype=float) / s
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(system.vector_field),
-        diffrax.Tsit5(),
-        t0=0.0,
-        t1=float(n),
-        dt0=1.0 / solver.steps_per_period,
-        y0=y0,
-        saveat=diffrax.SaveAt(ts=ts),
-        stepsize_controller=diffrax.ConstantStepSize(),
-        max_steps=n * solver.steps_per_period + 16,
-        adjoint=diffrax.RecursiveCheckpointAdjoint(checkpoints=n * solver.steps_per_period + 16),
-    )
-    ys = sol.ys
-    assert ys is not None
+    steps = solver.steps_per_period
+
+    # Two solves, the transient then the kept window with its dense (Tsit5) interpolant, sampled at the save
+    # times; the same steps and interpolant as one solve saving at those times, without diffrax's run-time
+    # checks of save times and of the result (host callbacks, which JAX's persistent compilation cache does
+    # not store: every new process would compile the solve again). Constant steps with max_steps above their
+    # number cannot fail; a non-finite state shows as NaN in `periodicity`.
+    def integrate(t0: float, t1: float, y: Float[Array, " n"], saveat: diffrax.SaveAt) -> diffrax.Solution:
+        n_steps = round((t1 - t0) * steps) + 16
+        return diffrax.diffeqsolve(
+            diffrax.ODETerm(system.vector_field),
+            diffrax.Tsit5(),
+            t0=t0,
+            t1=t1,
+            dt0=1.0 / steps,
+            y0=y,
+            saveat=saveat,
+            stepsize_controller=diffrax.ConstantStepSize(),
+            max_steps=n_steps,
+            adjoint=diffrax.RecursiveCheckpointAdjoint(checkpoints=n_steps),
+            throw=False,
+        )
+
+    settle = integrate(0.0, t_start, y0, diffrax.SaveAt(t1=True))
+    assert settle.ys is not None
+    window = integrate(t_start, float(n), settle.ys[-1], diffrax.SaveAt(dense=True))
+    ts = t_start + np.arange(rec * s + 1, dtype=float) / s
+    ys = jax.vmap(window.evaluate)(jnp.asarray(ts))
+    ok = (settle.result == diffrax.RESULTS.successful) & (window.result == diffrax.RESULTS.successful)
     q, v = ys[:, :d], ys[:, d:]
-    periodicity = jnp.max(jnp.abs(q[-1] - q[0]))
-    return PeriodicSolution(ts[:-1] - t_start, q[:-1], v[:-1], periodicity)
+    periodicity = jnp.where(ok, jnp.max(jnp.abs(q[-1] - q[0])), jnp.nan)
+    return PeriodicSolution(jnp.asarray(ts[:-1] - t_start), q[:-1], v[:-1], periodicity)
 
 
 def peak_to_peak(x: Float[Array, "*b s"], axis: int = -1) -> Float[Array, "*b"]:

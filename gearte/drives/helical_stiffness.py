@@ -30,7 +30,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .helical_geometry import Geometry, HelicalStage, mesh_phases
+from .helical_geometry import Geometry, HelicalStage, lead_mismatch_gap, mesh_phases
 from .helical_modifications import StageModifications, crowning, flank_pair_relief
 
 STIFFNESS_MODELS = ("slices", "mean")
@@ -64,7 +64,8 @@ class SlicedMeshes(eqx.Module):
 
     Meshes are ordered sun–planet 1 … N, then planet–ring 1 … N. Calling it at τ (mesh periods)
     returns ``(gap, weight)``, each of shape (2N·K, J): `gap` (µm) is the excitation added to the
-    members' approach along the contact normal (LOA errors minus the modification), `weight` the
+    members' approach along the contact normal (LOA errors plus the lead mismatch minus the
+    modification), `weight` the
     pair's contact weight (0 … 1).
     """
 
@@ -76,6 +77,7 @@ class SlicedMeshes(eqx.Module):
     half_span: Float[Array, ""]
     contact_ratio: Float[Array, " m"]
     crowning: Float[Array, "m k"]
+    mismatch: Float[Array, "m k"]
     modifications: StageModifications
     errors: Callable[[Array], Array] | None
     n_planets: int = eqx.field(static=True)
@@ -111,6 +113,8 @@ class SlicedMeshes(eqx.Module):
         c_ext = crowning(m.sun, m.planet_sun_flank, z, stage.face_width)
         c_int = crowning(m.planet_ring_flank, m.ring, z, stage.face_width)
         self.crowning = jnp.concatenate([jnp.broadcast_to(c_ext, (n, n_slices)), jnp.broadcast_to(c_int, (n, n_slices))])
+        mismatch = lead_mismatch_gap(stage.lead_mismatch[:, None], z[None, :], stage.face_width)  # (2, K)
+        self.mismatch = jnp.concatenate([jnp.broadcast_to(mismatch[0], (n, n_slices)), jnp.broadcast_to(mismatch[1], (n, n_slices))])
         self.modifications = modifications
         self.errors = errors
         self.n_planets, self.n_slices, self.pairs, self.model = n, n_slices, pairs, model
@@ -140,7 +144,7 @@ class SlicedMeshes(eqx.Module):
             ]
         )
         h = relief + self.crowning[..., None]
-        gap = -h
+        gap = self.mismatch[..., None] - h
         if self.errors is not None:
             gap = gap + self.errors(tau)[:, None, None]
         s = gap.shape[0] * gap.shape[1]
