@@ -177,9 +177,9 @@ def peaks_refined(mags, phases, *, per_period: int = 16, candidates: int = 2, st
     return abs(GAIN_RAD_PER_UM) * out
 
 
-def baseline_refined(rng, n):
+def baseline_refined(rng, n, candidates: int = 2):
     mags, phases = draw_random_assembly(rng, n)
-    return peaks_refined(mags, phases)
+    return peaks_refined(mags, phases, candidates=candidates)
 
 
 def draw_random_assembly(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -441,15 +441,28 @@ def main(argv=None) -> int:
             f"(best of {args.baseline_repeats} on {size:,} samples)"
         )
 
-    # 2d. The best NumPy formulation (gearte's own algorithm without its certificate): accuracy on all n draws, timing on a subset.
-    refined_err = float(np.max(np.abs(peaks_refined(mags, phases) - exact) / exact))
+    # 2d. The best NumPy formulation (gearte's own algorithm without its certificate): the fewest candidate blocks per
+    # direction whose peaks are within the tolerance on all n draws (as the grid density above), then timed on a subset.
+    refined_err, cands = None, None
+    refined_sweep = []
+    for c in (2, 3, 4, 6, 8, 12):
+        err_c = float(np.max(np.abs(peaks_refined(mags, phases, candidates=c) - exact) / exact))
+        refined_sweep.append({"candidates": c, "max_rel_error": err_c})
+        print(f"  refined baseline, {c} candidate blocks per direction: max relative error {err_c:.1e}")
+        if err_c <= args.tolerance:
+            refined_err, cands = err_c, c
+            break
+    if cands is None:
+        refined_err, cands = refined_sweep[-1]["max_rel_error"], refined_sweep[-1]["candidates"]
     rng = np.random.default_rng(12345)
     size = min(args.subset_refined, max(n, 1000))
-    best, all_t = best_of(lambda: baseline_refined(rng, size), args.baseline_repeats)
+    best, all_t = best_of(lambda: baseline_refined(rng, size, cands), args.baseline_repeats)
     baseline.append(
         {
             "variant": "refined",
             "points_per_rev": 16 * max(ORDERS) // HYPER_PERIOD_REVS,
+            "candidates": cands,
+            "candidate_sweep": refined_sweep,
             "max_rel_error": refined_err,
             "subset_samples": size,
             "seconds_best": best,
@@ -459,7 +472,8 @@ def main(argv=None) -> int:
         }
     )
     print(
-        f"baseline refined (grid 16/period + Newton): {fmt_us(best / size)} per sample, max relative error {refined_err:.1e} on {n:,} draws"
+        f"baseline refined (grid 16/period + Newton, {cands} blocks per direction): {fmt_us(best / size)} per sample, "
+        f"max relative error {refined_err:.1e} on {n:,} draws"
     )
 
     # 3. End to end: the command line, a fresh process; the first run with an empty compilation cache, then cached runs.
@@ -677,8 +691,9 @@ def report(r: dict) -> str:
         "precomputes sin and cos of each term's frequency on the grid (setup excluded from its time) and uses a "
         'matrix product (OpenBLAS, may use all cores). "refined" is gearte\'s own algorithm in NumPy: the terms grouped by '
         "frequency into a trigonometric polynomial, a tabulated grid of 16 points per period of the fastest order (a matrix "
-        "product), the two best half-period blocks per direction and two vectorised Newton steps; no certificate, its "
-        "accuracy is measured on all the draws. The best baseline at equal accuracy is the fastest one whose error is "
+        "product), the best half-period blocks per direction (the fewest that reach the tolerance on all the draws: "
+        "without gearte's certificate a rare sample's maximum lies in a lower-ranked block) and two vectorised Newton "
+        "steps. The best baseline at equal accuracy is the fastest one whose error is "
         "within the tolerance.",
         "- Baseline per-sample times are measured on a subset of samples, because the baseline at full density takes "
         "milliseconds per sample; its cost is linear in the number of samples.",

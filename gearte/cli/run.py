@@ -122,7 +122,7 @@ CONFIRM_SECONDS = 15 * 60
 CONFIRM_BYTES = 2 * 2**30
 #: Per-sample results (bytes) above which a plain study (no study kinds, no per-sample drive outputs) is
 #: streamed: statistics accumulated chunk by chunk (`gearte.studies.streaming`), nothing held per sample.
-HOLD_BYTES = 256 * 2**20
+HOLD_BYTES = 64 * 2**20
 
 
 @dataclasses.dataclass(frozen=True)
