@@ -68,6 +68,22 @@ class _Blocks:
     m2: np.ndarray  # (k, m)
 
 
+def _bin_chunk(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The distinct bins of a chunk (sorted), the count and the first index of each: by counting over the
+    chunk's key range when it is narrow (a few binades: linear time), else by sorting (`np.unique`)."""
+    lo, hi = int(keys.min()), int(keys.max())
+    span = hi - lo + 1
+    if span > 4 * len(keys) + 65_536:
+        u, first, counts = np.unique(keys, return_index=True, return_counts=True)
+        return u, counts, first
+    rel = (keys - np.uint64(lo)).astype(np.int64)
+    counts = np.bincount(rel, minlength=span)
+    first = np.full(span, np.iinfo(np.int64).max)
+    np.minimum.at(first, rel, np.arange(len(rel)))
+    hit = np.nonzero(counts)[0]
+    return hit.astype(np.uint64) + np.uint64(lo), counts[hit], first[hit]
+
+
 def _summarise(block: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean and M2 of each column of one block (n, m), each from its own contiguous copy, so that a
     block's summary depends only on its values."""
@@ -166,8 +182,7 @@ class StreamingStatistics:
         np.minimum(self._min, v.min(axis=0), out=self._min)
         np.maximum(self._max, v.max(axis=0), out=self._max)
         for j in range(self._m):
-            keys, first, counts = np.unique(_ordered(v[:, j]) >> self._shift, return_index=True, return_counts=True)
-            self._add_bins(j, keys, counts, first + self._n)
+            self._add_bins(j, *_bin_chunk(_ordered(v[:, j]) >> self._shift), offset=self._n)
         data = np.concatenate([self._partial, v]) if len(self._partial) else v
         full = len(data) // self.block * self.block
         for s in range(0, full, self.block):
@@ -178,7 +193,8 @@ class StreamingStatistics:
         self._partial = np.array(data[full:])
         self._n += len(v)
 
-    def _add_bins(self, j: int, keys: np.ndarray, counts: np.ndarray, first: np.ndarray) -> None:
+    def _add_bins(self, j: int, keys: np.ndarray, counts: np.ndarray, first: np.ndarray, *, offset: int = 0) -> None:
+        first = first + offset
         allk = np.concatenate([self._keys[j], keys])
         uk, inv = np.unique(allk, return_inverse=True)
         self._keys[j] = uk
@@ -232,7 +248,7 @@ class StreamingStatistics:
         out._max = np.maximum(self._max, other._max)
         for j in range(self._m):
             out._keys[j], out._counts[j], out._first[j] = self._keys[j], self._counts[j], self._first[j]
-            out._add_bins(j, other._keys[j], other._counts[j], other._first[j] + self._n)
+            out._add_bins(j, other._keys[j], other._counts[j], other._first[j], offset=self._n)
         return out
 
     # ------------------------------------------------------------------ results
