@@ -135,7 +135,7 @@ def test_two_processes_write_the_single_process_results(single_run, tmp_path):
     a, b = np.load(single_run / "samples.npz"), np.load(out / "samples.npz")
     np.testing.assert_array_equal(a["te_rad"], b["te_rad"])
     s = json.loads((out / "summary.json").read_text())
-    assert (s["processes"], s["devices"]) == (2, 2)
+    assert s["processes"] == 2 and s["devices"] >= 2  # each process's devices (the CLI makes one per core)
     assert json.loads((single_run / "summary.json").read_text())["te"] == s["te"]
 
 

@@ -14,6 +14,7 @@ import argparse
 import dataclasses
 import importlib
 import json
+import os
 import shlex
 import signal
 import sys
@@ -284,8 +285,27 @@ def _distributed(args) -> None:
         jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.processes, process_id=args.process_id)
 
 
+def _cores_as_devices() -> None:
+    """On a CPU, one XLA device per usable core (`GEARTE_CPU_DEVICES=N` to choose): the Monte Carlo shards its
+    blocks over them (the results are bit-identical for any device count). Only before JAX is imported, and
+    only if `XLA_FLAGS` does not already set the count."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "jax" in sys.modules or "xla_force_host_platform_device_count" in flags:
+        return
+    wanted = os.environ.get("GEARTE_CPU_DEVICES", "").strip()
+    if wanted:
+        if not wanted.isdigit() or int(wanted) < 1:
+            raise ConfigError(f"GEARTE_CPU_DEVICES: a whole number ≥ 1 of CPU devices, got {wanted!r}")
+        count = int(wanted)
+    else:
+        count = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if count > 1:
+        os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={count}".strip()
+
+
 def _setup_jax(args) -> None:
-    """What a computing command sets up first: float64, and the persistent compilation cache."""
+    """What a computing command sets up first: CPU devices, float64, and the persistent compilation cache."""
+    _cores_as_devices()
     if args.command == "run":
         _distributed(args)
     enable_x64 = _import("..core.precision").enable_x64
