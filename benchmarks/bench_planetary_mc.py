@@ -577,17 +577,21 @@ def main(argv=None) -> int:
         "best_numpy": best_numpy["variant"],
         "targets_met": targets,
     }
-    md = report(result)
+    write_results("planetary_mc", report(result), result, quick=args.quick)
+    return 0
+
+
+def write_results(name: str, md: str, result: dict, *, quick: bool) -> None:
+    """Print the report; unless `quick`, write it and the JSON to benchmarks/results/<name>.md / .json."""
     print()
     print(md)
-    if args.quick:
+    if quick:
         print("(--quick: results not written)")
-        return 0
+        return
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "planetary_mc.md").write_text(md, encoding="utf-8")
-    (RESULTS / "planetary_mc.json").write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-    print(f"written: {RESULTS / 'planetary_mc.md'}, {RESULTS / 'planetary_mc.json'}")
-    return 0
+    (RESULTS / f"{name}.md").write_text(md, encoding="utf-8")
+    (RESULTS / f"{name}.json").write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    print(f"written: {RESULTS / f'{name}.md'}, {RESULTS / f'{name}.json'}")
 
 
 def ratio(x: float) -> str:

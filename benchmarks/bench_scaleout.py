@@ -33,11 +33,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_planetary_mc import best_of, machine_info
+from bench_planetary_mc import best_of, machine_info, write_results
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = "examples/planetary_wang2013_random.toml"
-RESULTS = ROOT / "benchmarks" / "results"
 ARCSEC = 180 * 3600 / np.pi
 
 
@@ -276,16 +275,7 @@ def main(argv=None) -> int:
         print("memory:")
         mem = memory([20_000, 12_000_000] if args.quick else [1_000_000, 10_000_000, 100_000_000], tmp)
     result = {"benchmark": "scaleout", "machine": info, "profile": prof, "gradient": grad, "devices": dev, "memory": mem}
-    md = report(result)
-    print()
-    print(md)
-    if args.quick:
-        print("(--quick: results not written)")
-        return 0
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "scaleout.md").write_text(md, encoding="utf-8")
-    (RESULTS / "scaleout.json").write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-    print(f"written: {RESULTS / 'scaleout.md'}")
+    write_results("scaleout", report(result), result, quick=args.quick)
     return 0
 
 
