@@ -273,7 +273,7 @@ def main(argv=None) -> int:
         print("devices:")
         dev = devices(8_192 if args.quick else 200_000, repeats, tmp)
         print("memory:")
-        mem = memory([20_000, 12_000_000] if args.quick else [1_000_000, 10_000_000, 100_000_000], tmp)
+        mem = memory([20_000, 3_000_000] if args.quick else [1_000_000, 10_000_000, 100_000_000], tmp)
     result = {"benchmark": "scaleout", "machine": info, "profile": prof, "gradient": grad, "devices": dev, "memory": mem}
     write_results("scaleout", report(result), result, quick=args.quick)
     return 0
