@@ -157,7 +157,7 @@ def estimate_cost(study: Study, *, measure_above: int | None = None) -> Cost:
     fn = _sampler(_phases_to_choose_held(study))
     shapes = jax.eval_shape(fn, as_key(0))
     per = 3 * 8 + sum(int(np.prod(x.shape)) * x.dtype.itemsize for x in jax.tree.leaves(shapes[1]))  # te, te_rad, index
-    nbytes = 0 if _streams(study, fn) else per * study.samples
+    nbytes = 0 if _streams(study) else per * study.samples
     if study.samples <= (MEASURE_ABOVE if measure_above is None else measure_above):
         return Cost(study.samples, nbytes)
     # The smallest compiled call (two blocks), run twice: the second is timed.
@@ -190,13 +190,13 @@ def run_study(
     return summary
 
 
-def _streams(study: Study, sampler: _RunSample) -> bool:
-    """Whether `gearte run` streams this study: a plain study (no study kinds, no per-sample drive outputs,
-    no drive-specific study outputs) whose per-sample results would exceed `HOLD_BYTES`."""
-    plain = not study.kinds and type(study.drive).study_outputs is AbstractDrive.study_outputs
-    if not plain or jax.tree.leaves(jax.eval_shape(sampler, as_key(0))[1]):
-        return False
-    return 3 * 8 * study.samples > HOLD_BYTES
+def _streams(study: Study) -> bool:
+    """Whether `gearte run` streams this study: a plain study (no study kinds, and a drive with neither per-sample
+    outputs nor study outputs of its own) whose per-sample results would exceed `HOLD_BYTES`. Decided from the
+    drive's class, without tracing the study."""
+    drive = type(study.drive)
+    plain = not study.kinds and drive.sample_outputs is AbstractDrive.sample_outputs and drive.study_outputs is AbstractDrive.study_outputs
+    return plain and 3 * 8 * study.samples > HOLD_BYTES
 
 
 def _one_value(sampler: _RunSample, study: Study, index: int, angle: bool) -> float:
@@ -269,7 +269,7 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
     sampler = _sampler(study)
     angle = study.metric.quantity == "angle"
     unit = study.unit if angle else "pairs"
-    streamed = _streams(study, sampler)
+    streamed = _streams(study)
     if streamed:
         mc, stats, typical, stream_summary, hist = _monte_carlo_streamed(study, sampler, tmp, progress=progress, keep_samples=keep_samples)
         values = values_rad = None
