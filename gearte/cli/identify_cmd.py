@@ -20,7 +20,7 @@ from ..identification import IdentificationProblem, assemble_batch, diagnose, id
 from ..identification.fit import Z95, _solve
 from ..studies.montecarlo import as_key
 from .config import load_study
-from .identify_grid_cmd import run_identify_grid
+from .identify_grid_cmd import run_identify_grid, summary_header
 from .io import atomic_output_dir, write_json, written_files
 
 
@@ -83,12 +83,7 @@ def run_identify(args, command: str) -> int:
                 }
             )
         summary = {
-            "gearte_version": __version__,
-            "command": command,
-            "study": study.name,
-            "record": str(args.record),
-            "samples": len(rec.te),
-            "revolutions": rec.revolutions,
+            **summary_header(study, args, rec, command),
             "result": result_name(sol.result),
             "unit": unit,
             "residual_rms": float(sol.residual_rms) * conv,

@@ -26,6 +26,18 @@ def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
+def summary_header(study, args, rec, command: str) -> dict:
+    """The first entries of an identification's summary.json: version, command, study, record and its size."""
+    return {
+        "gearte_version": __version__,
+        "command": command,
+        "study": study.name,
+        "record": str(args.record),
+        "samples": len(rec.te),
+        "revolutions": rec.revolutions,
+    }
+
+
 def run_identify_grid(args, command: str, study, rec: MeasuredRecord) -> int:
     drive = study.drive
     if args.adjust:
@@ -54,12 +66,7 @@ def run_identify_grid(args, command: str, study, rec: MeasuredRecord) -> int:
         theta = np.asarray(drive.input_angles())
         model = np.asarray(drive.te(drive.response(sol.errors))) + float(sol.offset[0])
         summary = {
-            "gearte_version": __version__,
-            "command": command,
-            "study": study.name,
-            "record": str(args.record),
-            "samples": len(rec.te),
-            "revolutions": rec.revolutions,
+            **summary_header(study, args, rec, command),
             "drive": drive.type_name,
             "method": "Levenberg-Marquardt on the drive's model at its grid angles (docs/identification.md, Grid drives)",
             "grid_angles": int(theta.size),
