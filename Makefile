@@ -35,10 +35,13 @@ lint: $(STAMP)
 	$(BIN)/basedpyright --level error
 
 test: lint
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -n 2 --dist loadgroup --no-loadscope-reorder
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_planetary_mc.py
+	$(BIN)/python benchmarks/bench_scaleout.py
+	$(BIN)/python benchmarks/bench_grid_drives.py
+	$(BIN)/python benchmarks/bench_helical.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

@@ -1,8 +1,9 @@
 """The `gearte` command's entry point.
 
-gearte and JAX take a second or more to import; this module installs the interrupt handlers
-first, so that Ctrl-C or SIGTERM ends the command cleanly (exit status 128 + signal: 130
-for Ctrl-C, 143 for SIGTERM; no traceback, nothing written) from its first instant.
+This module installs the interrupt handlers first, so that Ctrl-C or SIGTERM ends the command
+cleanly (exit status 128 + signal: 130 for Ctrl-C, 143 for SIGTERM; no traceback, nothing
+written) from its first instant. (The command line itself is light; it imports JAX and the
+drives, which take a second or more, in the commands that need them, with interrupts deferred.)
 It lives outside the `gearte` package because importing anything inside it imports gearte.
 """
 

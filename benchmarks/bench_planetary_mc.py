@@ -127,6 +127,61 @@ def peaks_tabulated(mags, phases, sin_t, cos_t) -> np.ndarray:
     return abs(GAIN_RAD_PER_UM) * out
 
 
+# The best NumPy formulation of gearte's own algorithm: terms grouped by frequency into a trigonometric
+# polynomial in τ = θ/24 (orders 3, 7, 21 and a constant), a tabulated grid of 16 points per period of order 21
+# (a matrix product), the best blocks (half a period each) per direction, and vectorised Newton steps on the
+# polynomial from their best grid points. No certificate (gearte's rigorous bound); its accuracy is measured.
+ORDERS = (3, 7, 21)
+TERM_ORDER = np.rint(TERM_FREQ * HYPER_PERIOD_REVS).astype(int)
+
+
+def grouped(mags: np.ndarray, phases: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """c₀ (b,), a (b, 3), b (b, 3): TE/gain = c₀ + Σ a_k cos kτ + b_k sin kτ (µm)."""
+    amp, ph = terms(mags, phases)
+    s_part, c_part = amp * np.sin(ph), amp * np.cos(ph)  # A sin(kτ + φ) = A sin φ cos kτ + A cos φ sin kτ
+    c0 = s_part[:, TERM_ORDER == 0].sum(axis=1)
+    a = np.stack([s_part[:, TERM_ORDER == k].sum(axis=1) for k in ORDERS], axis=1)
+    b = np.stack([c_part[:, TERM_ORDER == k].sum(axis=1) for k in ORDERS], axis=1)
+    return c0, a, b
+
+
+def peaks_refined(mags, phases, *, per_period: int = 16, candidates: int = 2, steps: int = 2) -> np.ndarray:
+    """max |TE| (rad) per sample: tabulated coarse grid, best blocks, Newton refinement (all vectorised)."""
+    k = np.asarray(ORDERS, dtype=float)
+    m = per_period * max(ORDERS)
+    blk = per_period // 2
+    h = TWO_PI / m
+    kt = np.outer(k, h * np.arange(m))
+    basis = np.concatenate([np.cos(kt), np.sin(kt)])  # (6, m)
+    out = np.empty(len(mags))
+    bs = block_size(m)
+    for s0 in range(0, len(mags), bs):
+        c0, a, b = grouped(mags[s0 : s0 + bs], phases[s0 : s0 + bs])
+        g = c0[:, None] + np.concatenate([a, b], axis=1) @ basis  # (n, m)
+        best = []
+        for sign in (1.0, -1.0):
+            sg = (sign * g).reshape(len(g), m // blk, blk)
+            top = np.argpartition(-sg.max(axis=2), candidates - 1, axis=1)[:, :candidates]  # best blocks
+            within = np.take_along_axis(sg.argmax(axis=2), top, axis=1)
+            t = (top * blk + within) * h  # (n, c)
+            for _ in range(steps):
+                ckt, skt = np.cos(k * t[..., None]), np.sin(k * t[..., None])
+                f1 = np.sum(k * (b[:, None] * ckt - a[:, None] * skt), axis=-1)
+                f2 = -np.sum(k * k * (a[:, None] * ckt + b[:, None] * skt), axis=-1)
+                ok = sign * f2 < 0
+                t = t - np.where(ok, np.clip(f1 / np.where(ok, f2, 1.0), -h, h), 0.0)
+            ckt, skt = np.cos(k * t[..., None]), np.sin(k * t[..., None])
+            f = c0[:, None] + np.sum(a[:, None] * ckt + b[:, None] * skt, axis=-1)
+            best.append((sign * f).max(axis=1))
+        out[s0 : s0 + bs] = np.maximum(best[0], best[1])
+    return abs(GAIN_RAD_PER_UM) * out
+
+
+def baseline_refined(rng, n, candidates: int = 2):
+    mags, phases = draw_random_assembly(rng, n)
+    return peaks_refined(mags, phases, candidates=candidates)
+
+
 def draw_random_assembly(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
     """The random-assembly study: magnitudes at the Table 1 tolerances (fixed, nothing to draw), phases uniform."""
     return np.broadcast_to(TOLERANCE_UM, (n, 6)), rng.uniform(0.0, TWO_PI, size=(n, 6))
@@ -236,12 +291,14 @@ def main(argv=None) -> int:
     ap.add_argument("--subset-direct", type=int, default=500, help="samples for timing the direct baseline (default 500)")
     ap.add_argument("--baseline-repeats", type=int, default=3, help="baseline timing repeats, best taken (default 3)")
     ap.add_argument("--e2e-samples", type=int, default=500_000, help="samples of the end-to-end `gearte run` (default 500,000)")
-    ap.add_argument("--e2e-repeats", type=int, default=3, help="end-to-end runs; the median is used (default 3)")
+    ap.add_argument("--e2e-repeats", type=int, default=3, help="cached end-to-end runs after the first; the median is used (default 3)")
+    ap.add_argument("--e2e-large", type=int, default=10_000_000, help="samples of the large end-to-end run (default 10⁷)")
+    ap.add_argument("--subset-refined", type=int, default=20_000, help="samples for timing the refined baseline (default 20,000)")
     ap.add_argument("--quick", action="store_true", help="small sizes for a smoke run; results are not written")
     args = ap.parse_args(argv)
     if args.quick:
         args.samples, args.repeats, args.subset, args.subset_direct = 4000, 2, 200, 50
-        args.baseline_repeats, args.e2e_samples, args.e2e_repeats = 1, 20_000, 1
+        args.baseline_repeats, args.e2e_samples, args.e2e_repeats, args.e2e_large, args.subset_refined = 1, 20_000, 1, 40_000, 1000
 
     import jax
 
@@ -384,7 +441,42 @@ def main(argv=None) -> int:
             f"(best of {args.baseline_repeats} on {size:,} samples)"
         )
 
-    # 3. End to end: the command line, a fresh process, compilation included.
+    # 2d. The best NumPy formulation (gearte's own algorithm without its certificate): the fewest candidate blocks per
+    # direction whose peaks are within the tolerance on all n draws (as the grid density above), then timed on a subset.
+    refined_err, cands = None, None
+    refined_sweep = []
+    for c in (2, 3, 4, 6, 8, 12):
+        err_c = float(np.max(np.abs(peaks_refined(mags, phases, candidates=c) - exact) / exact))
+        refined_sweep.append({"candidates": c, "max_rel_error": err_c})
+        print(f"  refined baseline, {c} candidate blocks per direction: max relative error {err_c:.1e}")
+        if err_c <= args.tolerance:
+            refined_err, cands = err_c, c
+            break
+    if cands is None:
+        refined_err, cands = refined_sweep[-1]["max_rel_error"], refined_sweep[-1]["candidates"]
+    rng = np.random.default_rng(12345)
+    size = min(args.subset_refined, max(n, 1000))
+    best, all_t = best_of(lambda: baseline_refined(rng, size, cands), args.baseline_repeats)
+    baseline.append(
+        {
+            "variant": "refined",
+            "points_per_rev": 16 * max(ORDERS) // HYPER_PERIOD_REVS,
+            "candidates": cands,
+            "candidate_sweep": refined_sweep,
+            "max_rel_error": refined_err,
+            "subset_samples": size,
+            "seconds_best": best,
+            "seconds_all": all_t,
+            "setup_seconds_excluded": 0.0,
+            "per_sample_s": best / size,
+        }
+    )
+    print(
+        f"baseline refined (grid 16/period + Newton, {cands} blocks per direction): {fmt_us(best / size)} per sample, "
+        f"max relative error {refined_err:.1e} on {n:,} draws"
+    )
+
+    # 3. End to end: the command line, a fresh process; the first run with an empty compilation cache, then cached runs.
     env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_COMPILATION_CACHE")}
     gearte_cli = Path(sys.executable).with_name("gearte")
     cmd_base = [
@@ -395,32 +487,49 @@ def main(argv=None) -> int:
         str(args.e2e_samples),
         "--no-progress",
     ]
-    e2e_times = []
     tmp = Path(tempfile.mkdtemp(prefix="gearte-bench-"))
+    env["GEARTE_CACHE_DIR"] = str(tmp / "cache")  # empty: the first run compiles, later runs load
+    e2e_runs = {}
     try:
-        for r in range(args.e2e_repeats):
-            out = tmp / f"run{r}"
-            t0 = time.perf_counter()
-            proc = subprocess.run(cmd_base + ["--out", str(out)], cwd=ROOT, env=env, capture_output=True, text=True)
-            e2e_times.append(time.perf_counter() - t0)
-            if proc.returncode != 0:
-                raise RuntimeError(f"gearte run failed ({proc.returncode}):\n{proc.stderr}")
-            summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-            print(f"end to end, run {r + 1}: {e2e_times[-1]:.2f} s wall ({summary['timing_s']['monte_carlo']:.2f} s in the Monte Carlo)")
+        for samples, cached_runs in ((args.e2e_samples, args.e2e_repeats), (args.e2e_large, 1)):
+            times = []
+            for r in range(cached_runs + 1):
+                out = tmp / f"run{samples}_{r}"
+                cmd = cmd_base[:3] + ["--samples", str(samples), "--no-progress", "--yes", "--out", str(out)]
+                t0 = time.perf_counter()
+                proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+                times.append(time.perf_counter() - t0)
+                if proc.returncode != 0:
+                    raise RuntimeError(f"gearte run failed ({proc.returncode}):\n{proc.stderr}")
+                summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+                print(
+                    f"end to end, {samples:,} samples, {'first' if r == 0 and samples == args.e2e_samples else 'cached'} run: "
+                    f"{times[-1]:.2f} s wall ({summary['timing_s']['monte_carlo']:.2f} s in the Monte Carlo)"
+                )
+                shutil.rmtree(out, ignore_errors=True)
+            e2e_runs[samples] = times
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    e2e = float(np.median(e2e_times))
+    first_e2e = e2e_runs[args.e2e_samples][0]
+    cached = e2e_runs[args.e2e_samples][1:]
+    e2e = float(np.median(cached))
     e2e_per_sample = e2e / args.e2e_samples
+    large = float(np.median(e2e_runs[args.e2e_large][1:]))
+    large_per_sample = large / args.e2e_large
 
     steady_per_sample = steady / n
     for row in baseline:
         row["ratio_vs_gearte_steady"] = row["per_sample_s"] / steady_per_sample
         row["ratio_vs_gearte_end_to_end"] = row["per_sample_s"] / e2e_per_sample
-    eq = [r for r in baseline if r["points_per_rev"] == chosen]
+        row["ratio_vs_gearte_end_to_end_large"] = row["per_sample_s"] / large_per_sample
+    best_numpy = min(
+        (r for r in baseline if r["max_rel_error"] is not None and r["max_rel_error"] <= args.tolerance), key=lambda r: r["per_sample_s"]
+    )
     targets = {
-        "steady_state_le_0.5s": steady <= 0.5,
-        "end_to_end_ratio_ge_100_vs_direct": next(r for r in eq if r["variant"] == "direct")["ratio_vs_gearte_end_to_end"] >= 100,
-        "end_to_end_ratio_ge_100_vs_tabulated": next(r for r in eq if r["variant"] == "tabulated")["ratio_vs_gearte_end_to_end"] >= 100,
+        "steady_state_le_0.1s_per_50000": steady * 50_000 / n <= 0.1,
+        "steady_ratio_ge_30_vs_best_numpy": best_numpy["ratio_vs_gearte_steady"] >= 30,
+        "end_to_end_large_ratio_ge_20_vs_best_numpy": best_numpy["ratio_vs_gearte_end_to_end_large"] >= 20,
+        "cached_run_le_3s": e2e <= 3.0,
     }
     info["load_average_at_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     busy1, own1, wall1 = _busy_cpu_seconds(), _own_cpu_seconds(), time.perf_counter()
@@ -454,25 +563,35 @@ def main(argv=None) -> int:
         },
         "baseline": baseline,
         "end_to_end": {
-            "command": " ".join(cmd_base + ["--out", "<tmpdir>"]),
+            "command": " ".join(cmd_base[:3] + ["--samples", "N", "--no-progress", "--yes", "--out", "<tmpdir>"]),
             "samples": args.e2e_samples,
-            "wall_s_all": e2e_times,
+            "first_run_s": first_e2e,
+            "wall_s_all": cached,
             "wall_s_median": e2e,
             "per_sample_s": e2e_per_sample,
+            "large_samples": args.e2e_large,
+            "large_wall_s_all": e2e_runs[args.e2e_large],
+            "large_cached_s": large,
+            "large_per_sample_s": large_per_sample,
         },
+        "best_numpy": best_numpy["variant"],
         "targets_met": targets,
     }
-    md = report(result)
+    write_results("planetary_mc", report(result), result, quick=args.quick)
+    return 0
+
+
+def write_results(name: str, md: str, result: dict, *, quick: bool) -> None:
+    """Print the report; unless `quick`, write it and the JSON to benchmarks/results/<name>.md / .json."""
     print()
     print(md)
-    if args.quick:
+    if quick:
         print("(--quick: results not written)")
-        return 0
+        return
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "planetary_mc.md").write_text(md, encoding="utf-8")
-    (RESULTS / "planetary_mc.json").write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-    print(f"written: {RESULTS / 'planetary_mc.md'}, {RESULTS / 'planetary_mc.json'}")
-    return 0
+    (RESULTS / f"{name}.md").write_text(md, encoding="utf-8")
+    (RESULTS / f"{name}.json").write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    print(f"written: {RESULTS / f'{name}.md'}, {RESULTS / f'{name}.json'}")
 
 
 def ratio(x: float) -> str:
@@ -509,16 +628,23 @@ def report(r: dict) -> str:
         "|---|---|---|---|---|",
         f"| gearte, first call (compilation + run) | {g['samples']:,} | {g['first_call_s']:.3f} s | | |",
         f"| gearte, steady state (best of {g['repeats']}), exact peaks | {g['samples']:,} | {g['steady_state_s']:.3f} s | "
-        f"{fmt_us(g['per_sample_steady_s'])} | ≤ 0.5 s: {yes(r['targets_met']['steady_state_le_0.5s'])} |",
+        f"{fmt_us(g['per_sample_steady_s'])} | ≤ 0.1 s per 50,000: {yes(r['targets_met']['steady_state_le_0.1s_per_50000'])} |",
         f"| gearte, compilation (first call − steady state) | | {g['compile_s']:.3f} s | | |",
-        f"| gearte end to end: `gearte run … --samples {e['samples']:,}` (median of {len(e['wall_s_all'])}; "
-        f"start-up, import, compilation, plots, files) | {e['samples']:,} | {e['wall_s_median']:.2f} s | {fmt_us(e['per_sample_s'])} | |",
+        f"| gearte end to end, first run (empty compilation cache): `gearte run … --samples {e['samples']:,}` | {e['samples']:,} | "
+        f"{e['first_run_s']:.2f} s | | |",
+        f"| gearte end to end, cached run (median of {len(e['wall_s_all'])}; start-up, import, Monte Carlo, plots, files) | "
+        f"{e['samples']:,} | {e['wall_s_median']:.2f} s | {fmt_us(e['per_sample_s'])} | ≤ 3 s: {yes(r['targets_met']['cached_run_le_3s'])} |",
+        f"| gearte end to end, cached run, streamed (nothing held per sample) | {e['large_samples']:,} | {e['large_cached_s']:.2f} s | "
+        f"{fmt_us(e['large_per_sample_s'])} | |",
     ]
     for b in r["baseline"]:
         err = f"{b['max_rel_error']:.1e}" if b["max_rel_error"] is not None else "—"
         tgt = ""
-        if b["points_per_rev"] == chosen:
-            tgt = f"end-to-end ratio ≥ 100×: {yes(b['ratio_vs_gearte_end_to_end'] >= 100)}"
+        if b["variant"] == r["best_numpy"]:
+            tgt = (
+                f"best NumPy at equal accuracy: ≥ 30× steady {yes(r['targets_met']['steady_ratio_ge_30_vs_best_numpy'])}, "
+                f"≥ 20× end to end at {e['large_samples']:,} {yes(r['targets_met']['end_to_end_large_ratio_ge_20_vs_best_numpy'])}"
+            )
         L.append(
             f"| NumPy baseline, {b['variant']}, {b['points_per_rev']:,} points/rev (max rel. error {err}); "
             f"**measured on a subset** | {b['subset_samples']:,} | {b['seconds_best']:.3f} s | {fmt_us(b['per_sample_s'])} | {tgt} |"
@@ -527,13 +653,15 @@ def report(r: dict) -> str:
         "",
         "Speed-up of gearte per sample (baseline time per sample ÷ gearte time per sample):",
         "",
-        "| baseline | points/rev | max rel. error | vs gearte steady state | vs gearte end to end |",
-        "|---|---|---|---|---|",
+        f"| baseline | points/rev | max rel. error | vs gearte steady state | vs gearte end to end ({e['samples']:,}) | "
+        f"vs gearte end to end ({e['large_samples']:,}) |",
+        "|---|---|---|---|---|---|",
     ]
     for b in r["baseline"]:
         err = f"{b['max_rel_error']:.1e}" if b["max_rel_error"] is not None else "—"
         L.append(
-            f"| {b['variant']} | {b['points_per_rev']:,} | {err} | {ratio(b['ratio_vs_gearte_steady'])} | {ratio(b['ratio_vs_gearte_end_to_end'])} |"
+            f"| {b['variant']} | {b['points_per_rev']:,} | {err} | {ratio(b['ratio_vs_gearte_steady'])} | "
+            f"{ratio(b['ratio_vs_gearte_end_to_end'])} | {ratio(b['ratio_vs_gearte_end_to_end_large'])} |"
         )
     L += [
         "",
@@ -565,13 +693,21 @@ def report(r: dict) -> str:
         "computes the nine terms on the grid and takes max |TE| per sample, in blocks of samples. "
         '"direct" calls `np.sin` for each term and grid point (single-threaded NumPy ufuncs); "tabulated" '
         "precomputes sin and cos of each term's frequency on the grid (setup excluded from its time) and uses a "
-        "matrix product (OpenBLAS, may use all cores).",
+        'matrix product (OpenBLAS, may use all cores). "refined" is gearte\'s own algorithm in NumPy: the terms grouped by '
+        "frequency into a trigonometric polynomial, a tabulated grid of 16 points per period of the fastest order (a matrix "
+        "product), the best half-period blocks per direction (the fewest that reach the tolerance on all the draws: "
+        "without gearte's certificate a rare sample's maximum lies in a lower-ranked block) and two vectorised Newton "
+        "steps. The best baseline at equal accuracy is the fastest one whose error is "
+        "within the tolerance.",
         "- Baseline per-sample times are measured on a subset of samples, because the baseline at full density takes "
         "milliseconds per sample; its cost is linear in the number of samples.",
-        f"- End to end includes Python start-up, importing JAX, compiling, the {e['samples']:,}-sample Monte Carlo, the histogram "
-        "and trace plots, `samples.npz`, `summary.json` and `report.md`; no persistent compilation cache.",
+        f"- End to end includes Python start-up, importing JAX, compiling (first run) or loading the compiled programs from "
+        f"gearte's compilation cache (later runs), the Monte Carlo, the histogram and trace plots, `samples.npz` (or, for the "
+        f"streamed {e['large_samples']:,}-sample run, the streamed statistics), `summary.json` and `report.md`.",
         f"- Runs: gearte steady state {', '.join(f'{t:.3f}' for t in g['steady_state_all_s'])} s; end to end "
-        f"{', '.join(f'{t:.2f}' for t in e['wall_s_all'])} s.",
+        f"{e['first_run_s']:.2f} s (first), {', '.join(f'{t:.2f}' for t in e['wall_s_all'])} s (cached); "
+        f"{', '.join(f'{t:.2f}' for t in e['large_wall_s_all'])} s at {e['large_samples']:,} samples (first of them compiles "
+        "the streamed path's extra programs).",
         "",
     ]
     return "\n".join(L)

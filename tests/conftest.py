@@ -3,18 +3,106 @@ import sys
 from pathlib import Path
 
 import jax
+import pytest
 
 # As optimistix's tests do: float64 and strict dtype promotion, so silent int/float or
 # float32/float64 mixing in the library fails loudly here. (Importing gearte changes no
 # global state; a user turns 64-bit mode on the same way.)
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
-# JAX's persistent compilation cache: a second run of the suite (and the notebooks' kernels,
-# which inherit the variable) reuses compiled code instead of compiling it again.
-_CACHE = os.environ.setdefault("GEARTE_TEST_JAX_CACHE", str(Path(__file__).resolve().parents[1] / ".pytest_cache" / "jax"))
-jax.config.update("jax_compilation_cache_dir", _CACHE)
-jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", _CACHE)
+# JAX's persistent compilation cache, the one the `gearte` command uses (gearte.core.cache: ~/.cache/gearte/jax
+# unless GEARTE_CACHE_DIR says otherwise; GEARTE_TEST_JAX_CACHE sets another for the suite alone). A second run
+# of the suite, from any clone, and a `gearte run` after it, reuse compiled code instead of compiling it again;
+# notebooks run in the test process, and the commands the tests start inherit GEARTE_CACHE_DIR.
+from gearte.core.cache import default_cache_dir, enable_compilation_cache  # noqa: E402
+
+_CACHE = os.environ.get("GEARTE_TEST_JAX_CACHE") or str(default_cache_dir())
+os.environ["GEARTE_CACHE_DIR"] = _CACHE
+enable_compilation_cache(_CACHE)
 
 sys.path.insert(0, os.path.dirname(__file__))
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+# ---------------------------------------------------------------- scheduling on the workers
+# `make test` runs the suite on two workers (``-n 2 --dist loadgroup --no-loadscope-reorder``) with the
+# scheduler below: each group runs whole on one worker, so its tests (and its notebook, run in the test
+# process) share the functions compiled for them and the session fixtures; groups start in decreasing
+# order of their cost (longest first, so that the two workers finish together). A test file not listed
+# is its own group. (The scheduler names the groups itself: xdist's ``xdist_group`` marks no longer
+# reach its scheduler under pytest ≥ 9.2.)
+GROUPS = {
+    "test_cycloid": "cycloid",
+    "test_cycloid_grinding": "cycloid",
+    "test_harmonic": "harmonic",
+    "test_harmonic_tooth_mesh": "harmonic",
+    "test_allocation": "planetary_optimise",
+    "test_budget": "planetary_optimise",
+    "test_sensitivity": "planetary_optimise",
+    "test_identify": "identification",
+    "test_identify_grid": "identification",
+    "test_assemble": "identification",
+    "test_identify_cli": "identification",
+    "test_montecarlo": "planetary",
+    "test_planetary": "planetary",
+    "test_scaleout": "planetary",
+    "test_doe": "doe",
+    "test_doe_cli": "doe",
+    "test_helical": "helical",
+    "test_helical_modification": "helical",
+}
+#: Notebook → the group of the tests of its subject (unlisted notebooks: group "notebooks").
+NOTEBOOK_GROUPS = {
+    "cycloid_clearance.ipynb": "cycloid",
+    "harmonic_drive.ipynb": "harmonic",
+    "tolerance_allocation.ipynb": "planetary_optimise",
+    "identify_and_assemble.ipynb": "identification",
+    "planetary_wang2013.ipynb": "planetary",
+    "helical_modification.ipynb": "helical",
+}
+#: Rough cost of each group (s, one worker, empty compilation cache): only their order matters.
+COST_S = {
+    "cycloid": 230,
+    "planetary_optimise": 225,
+    "identification": 120,
+    "harmonic": 130,
+    "helical": 130,
+    "test_contract": 105,
+    "doe": 45,
+    "planetary": 75,
+    "test_metrics": 30,
+    "test_fuzz_study_files": 25,
+    "test_cli": 24,
+    "test_interrupt": 23,
+}
+
+
+def group_of(nodeid: str) -> tuple[str, bool]:
+    """The group of a test (by its node id), and whether it is a notebook's run."""
+    path, _, name = nodeid.partition("::")
+    stem = Path(path).stem
+    if stem == "test_notebooks" and name.startswith("test_notebook_runs["):
+        return NOTEBOOK_GROUPS.get(name[len("test_notebook_runs[") : -1], "notebooks"), True
+    return GROUPS.get(stem, stem), False
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    del config
+    order = []
+    for i, item in enumerate(items):
+        group, notebook = group_of(item.nodeid)
+        order.append(((-COST_S.get(group, 0), group, notebook, i), item))
+    items[:] = [item for _, item in sorted(order, key=lambda k: k[0])]
+
+
+def pytest_xdist_make_scheduler(config, log):
+    from xdist.scheduler import LoadScopeScheduling
+
+    class GroupScheduling(LoadScopeScheduling):
+        """xdist's scope scheduling with `group_of` as the scope."""
+
+        def _split_scope(self, nodeid: str) -> str:
+            return group_of(nodeid)[0]
+
+    return GroupScheduling(config, log)

@@ -7,6 +7,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 import pytest
 from helpers import reference_extrema
 
@@ -229,3 +230,16 @@ def test_bad_allocation_configs(edit, match, tmp_path):
     cfg.write_text(edit((ROOT / "examples" / "planetary_wang2013_allocate.toml").read_text()))
     with pytest.raises(ConfigError, match=match.replace("[", r"\[")):
         load_study(cfg)
+
+
+def test_best_start_prefers_a_converged_start_among_ties():
+    from gearte.optimise.allocation import best_start
+
+    ok, stop = optx.RESULTS.successful, optx.RESULTS.max_steps_reached
+    results = jax.tree.map(lambda *x: jnp.stack(x), ok, stop, ok)
+    # Starts 0 and 1 reach the same optimum to rounding; 1 is lower by 1e-15 but did not converge.
+    assert best_start(jnp.array([2.0, 2.0 - 2e-15, 3.0]), results) == 0
+    # A clearly lower value wins, converged or not (reported by the result code).
+    assert best_start(jnp.array([2.0, 1.5, 3.0]), results) == 1
+    none_ok = jax.tree.map(lambda *x: jnp.stack(x), stop, stop, stop)
+    assert best_start(jnp.array([2.0, 1.0, 3.0]), none_ok) == 1

@@ -17,7 +17,7 @@ from gearte.cli.config import ConfigError, load_study, parse_angle
 
 ROOT = Path(__file__).resolve().parents[1]
 # Plain Monte Carlo studies; allocation and budget studies have their own tests (test_allocation, test_budget).
-EXAMPLES = sorted(p for p in (ROOT / "examples").glob("planetary_*.toml") if not p.stem.endswith(("_allocate", "_budget")))
+EXAMPLES = sorted(p for p in (ROOT / "examples").glob("planetary_*.toml") if not p.stem.endswith(("_allocate", "_budget", "_doe")))
 RANDOM = ROOT / "examples" / "planetary_wang2013_random.toml"
 
 
@@ -228,3 +228,29 @@ def test_real_command_line_entry_point(tmp_path):
     assert p.returncode == 2 and "--samples" in p.stderr
     p = subprocess.run([sys.executable, "-m", "gearte", "--version"], capture_output=True, text=True, env=env)
     assert p.returncode == 0 and p.stdout.strip() == f"gearte {gearte.__version__}"
+
+
+def test_compilation_cache_folder_and_switches(monkeypatch, tmp_path):
+    import importlib
+
+    from gearte.core.cache import cache_wanted, default_cache_dir
+
+    monkeypatch.delenv("GEARTE_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert default_cache_dir() == tmp_path / "xdg" / "gearte" / "jax"
+    monkeypatch.setenv("GEARTE_CACHE_DIR", str(tmp_path / "mine"))
+    assert default_cache_dir() == tmp_path / "mine"
+    for value, wanted in (("0", False), ("off", False), (" No ", False), ("false", False), ("1", True), ("yes", True)):
+        monkeypatch.setenv("GEARTE_COMPILATION_CACHE", value)
+        assert cache_wanted() is wanted, value
+    # The command turns the cache on unless told not to (the run below is refused after that choice: --out holds the study).
+    calls = []
+    cli_main = importlib.import_module("gearte.cli.main")  # the module (gearte.cli.main is also the function's name)
+    monkeypatch.setattr(cli_main, "enable_compilation_cache", lambda: calls.append(1))
+    study = tmp_path / "s.toml"
+    study.write_text(RANDOM.read_text())
+    for env, flag, expected in (("1", [], 1), ("1", ["--no-compile-cache"], 0), ("0", [], 0)):
+        calls.clear()
+        monkeypatch.setenv("GEARTE_COMPILATION_CACHE", env)
+        assert cli.main(["run", str(study), "--out", str(tmp_path), *flag]) == 2
+        assert len(calls) == expected, (env, flag)

@@ -38,7 +38,7 @@ def _examples_by_type() -> dict[str, Path]:
         raw = tomllib.loads(p.read_text(encoding="utf-8"))
         t = raw.get("drive", {}).get("type")
         # Prefer a plain Monte Carlo study of each drive; the study kinds have their own tests.
-        rank = (len({"allocation", "budget", "modification", "sensitivity"} & set(raw)), p.name, p)
+        rank = (len({"allocation", "budget", "modification", "sensitivity", "doe"} & set(raw)), p.name, p)
         if t is not None and (t not in ranked or rank[:2] < ranked[t][:2]):
             ranked[t] = rank
     return {t: r[2] for t, r in ranked.items()}

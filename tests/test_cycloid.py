@@ -681,3 +681,122 @@ def test_new_error_values_and_modifications_do_not_recompile():
         d = basic(modification=mod, analysis=grid)
         e = d.errors_dict(CycloidErrors(pin_radius=-5.0 * k, indexing=np.full(25, 1e-5 * k), disc_offset=3.0 * k))
         lost_motion(d, e)
+
+
+def _reference_rotations(drive, err, theta_T):
+    """Rotation to contact of every pin, pin by pin with a bracketing root search (SciPy's brentq) on the placed
+    flank of Yao & Liang's eqs. 1–2 written out in NumPy (an independent restatement of the model's notes):
+    (rotation, reachable, interference) per pin; rotation NaN where the pin cannot touch."""
+    zb, za = drive.z_pins, drive.z_lobes
+    um = 1e-3
+    R, a, r = float(drive.pin_circle_radius), float(drive.eccentricity), float(drive.pin_radius)
+    RZ, rZ = float(drive.wheel_pin_circle_radius), float(drive.wheel_pin_radius)
+    m = float(drive.modification.rotation)
+    e = {k: np.asarray(getattr(err, k), dtype=float) for k in ERROR_FIELDS}
+    R1, r1 = R + e["pin_circle_radius"] * um, r + e["pin_radius"] * um
+    K = a * zb / RZ
+    ex = (e["setup_eccentricity"] * np.cos(e["setup_phase"]) + e["mandrel_runout"] * np.cos(e["mandrel_phase"])) * um
+    ey = (e["setup_eccentricity"] * np.sin(e["setup_phase"]) + e["mandrel_runout"] * np.sin(e["mandrel_phase"])) * um
+    out = []
+    for j in range(zb):
+        psi0 = theta_T + 2 * np.pi * j / zb
+        psi = psi0 + e["pin_tangential"][j] * um / R1
+        rad = R1 + e["pin_radial"][j] * um
+        ob = (
+            np.array(
+                [
+                    e["pin_wheel_offset"] * np.cos(e["pin_wheel_offset_phase"]),
+                    -(a + e["eccentricity"] * um) / um + e["pin_wheel_offset"] * np.sin(e["pin_wheel_offset_phase"]),
+                ]
+            )
+            * um
+        )
+        c = (
+            ob
+            + rad * np.array([-np.sin(psi), np.cos(psi)])
+            - e["disc_offset"] * um * np.array([np.cos(e["disc_offset_phase"]), np.sin(e["disc_offset_phase"])])
+        )
+        phi_nom = (psi0 - 2 * np.pi * j + np.pi) % (2 * np.pi) - np.pi
+        s = 1.0 if phi_nom >= -1e-9 else -1.0
+        n = int(np.floor((psi0 - 2 * np.pi * j) / (2 * np.pi) + 1e-9 + 0.5)) % za
+        beta = 2 * np.pi * n / za + e["index_offset"] + e["indexing"][n]
+
+        def locus(t, s=s, n=n, beta=beta):
+            phi = s * t
+            u, v = phi / za, phi * zb / za
+            S = np.sqrt(1 + K * K - 2 * K * np.cos(phi))
+            d = rZ - r1
+            p = np.array(
+                [
+                    RZ * np.sin(u) - a * np.sin(v) - d * (np.sin(u) - K * np.sin(v)) / S,
+                    RZ * np.cos(u) - a * np.cos(v) - d * (np.cos(u) - K * np.cos(v)) / S,
+                ]
+            )
+            p = np.array([[np.cos(s * m), np.sin(s * m)], [-np.sin(s * m), np.cos(s * m)]]) @ p  # turned by −s m
+            p = p + np.array([e["dressing_x"], e["dressing_y"] + e["infeed"][n]]) * um
+            p = np.array([[np.cos(beta), np.sin(beta)], [-np.sin(beta), np.cos(beta)]]) @ p  # turned by −β
+            return p - np.array([ex, ey])
+
+        h = lambda t, c=c, locus=locus: np.hypot(*locus(t)) - np.hypot(*c)
+        interference, reachable = h(0.0) > 0, h(np.pi) >= 0
+        if interference or not reachable:
+            out.append((np.nan, reachable, interference))
+            continue
+        t = brentq(h, 0.0, np.pi, xtol=1e-15, rtol=1e-15, maxiter=200)
+        q = locus(t)
+        rot = np.arctan2(c[1], c[0]) - np.arctan2(q[1], q[0]) - theta_T * zb / za
+        out.append(((rot + np.pi) % (2 * np.pi) - np.pi, reachable, interference))
+    return out
+
+
+@pytest.mark.parametrize("make", [basic, modified])
+def test_vectorised_contact_solve_matches_a_pin_by_pin_root_search(make):
+    """The contact solve, vectorised over pins, input angles and reducers, against a pin-by-pin, angle-by-angle
+    bracketing root search on the model written out in NumPy, for random reducers of the examples' error sizes and a
+    grid with pins exactly at a tooth-space bottom and at a tooth tip (the folds of the solve)."""
+    d = make()
+    rng = np.random.default_rng(12)
+    thetas = revolution_angles(d, 2)[[0, 1, 7, 30]]
+    for _ in range(3):
+        err = CycloidErrors(
+            dressing_x=rng.uniform(-2, 2), dressing_y=rng.uniform(-2, 2), infeed=rng.uniform(-10, 10, 25),
+            indexing=rng.uniform(-30, 30, 25) / ARCSEC, setup_eccentricity=rng.uniform(0, 31.5), setup_phase=rng.uniform(0, 2 * np.pi),
+            mandrel_runout=5.0, pin_circle_radius=rng.uniform(-14.25, 14.25), pin_radius=rng.uniform(-58.5, -25),
+            eccentricity=rng.uniform(-20, 20), pin_tangential=90 * np.sin(2 * np.pi * np.arange(26) / 26 + rng.uniform(0, 2 * np.pi)),
+            pin_radial=rng.uniform(-5, 5, 26), disc_offset=rng.uniform(40, 90), disc_offset_phase=rng.uniform(0, 2 * np.pi),
+            pin_wheel_offset=rng.uniform(12, 33), pin_wheel_offset_phase=rng.uniform(0, 2 * np.pi),
+        )  # fmt: skip
+        s = sweep(d, err, thetas, normal=False)
+        assert bool(jnp.all(s.converged))
+        for k, th in enumerate(thetas):
+            ref = _reference_rotations(d, err, float(th))
+            rot = np.asarray(s.rotation_to_contact[k])
+            for j, (r_ref, reach, interf) in enumerate(ref):
+                assert bool(s.reachable[k, j]) == reach and bool(s.interference[k, j]) == interf
+                if reach and not interf:
+                    assert abs(rot[j] - r_ref) < 1e-10, (k, j, rot[j], r_ref)
+
+
+def test_polynomial_sines_and_arctangent_agree_with_numpy():
+    """The solve's float64 kernels (`sincos`, `atan2`, and `_trig`'s unreduced series for the flank angles of
+    t ∈ [0, π] and a little beyond) against NumPy's library functions: a few units in the last place."""
+    from collections import namedtuple
+
+    from gearte.drives.cycloid_pin_solve import _T_MARGIN, _trig, atan2, sincos
+
+    sincos, atan2, trig = jax.jit(sincos), jax.jit(atan2), jax.jit(_trig, static_argnums=0)
+    Lobes = namedtuple("Lobes", "z_lobes z_pins")
+
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.uniform(-40.0, 40.0, 4000), np.arange(-8, 9) * (np.pi / 4), [0.0, 1e-300, 1e6 + 0.5]])
+    s, c = map(np.asarray, sincos(jnp.asarray(x)))
+    assert np.max(np.abs(s - np.sin(x))) < 4e-16 and np.max(np.abs(c - np.cos(x))) < 4e-16
+    y, z = rng.normal(size=4000) * 10.0 ** rng.uniform(-6, 3, 4000), rng.normal(size=4000)
+    y, z = np.concatenate([y, [0.0, 1.0, -1.0, 0.0]]), np.concatenate([z, [1.0, 0.0, 0.0, -1.0]])
+    assert np.max(np.abs(np.asarray(atan2(jnp.asarray(y), jnp.asarray(z))) - np.arctan2(y, z))) < 1e-15
+    t = np.linspace(-_T_MARGIN, np.pi + _T_MARGIN, 20001)
+    for za in (3, 4, 8, 9, 25, 39):  # short series where the ranges allow (z_a ≥ 9), `sincos` otherwise
+        got = np.asarray(trig(Lobes(za, za + 1), jnp.asarray(t)))
+        u, v = t / za, t * (za + 1) / za
+        want = np.stack([np.sin(u), np.cos(u), np.sin(v), np.cos(v)])
+        assert np.max(np.abs(got - want)) < 1.2e-15, za

@@ -2,6 +2,7 @@
 
 import math
 
+import equinox as eqx
 import hypothesis.strategies as st
 import jax
 import numpy as np
@@ -103,16 +104,30 @@ def test_statistics_against_numpy():
         gearte.statistics([1.0, float("nan")])
 
 
-def test_one_compilation_for_repeated_runs():
-    traces = []
+class _CountingResponse(gearte.TEStudy):
+    traces: list = eqx.field(static=True)
 
-    class Counting(gearte.TEStudy):
-        def __call__(self, key):
-            traces.append(1)  # runs only while tracing
-            return super().__call__(key)
+    def __init__(self, drive, errors, traces):
+        super().__init__(drive, errors)
+        self.traces = traces
 
+    def response(self, key):
+        self.traces.append(1)  # runs only while tracing
+        return super().response(key)
+
+
+class _CountingCall(_CountingResponse):
+    def __call__(self, key):
+        return super().__call__(key)
+
+
+@pytest.mark.parametrize("kind", [_CountingResponse, _CountingCall])
+def test_one_compilation_for_repeated_runs(kind):
+    # A sinusoidal drive's study runs batch-wise (`TEStudy.batch`); a subclass with its own `__call__`
+    # runs under vmap. Either way one compiled block serves every run.
+    traces: list = []
     s = load_study("examples/planetary_wang2013_random.toml")
-    study = Counting(s.drive, s.errors)
+    study = kind(s.drive, s.errors, traces)
     gearte.monte_carlo(study, key=1, n_samples=500, chunk_size=128)
     gearte.monte_carlo(study, key=2, n_samples=1000, chunk_size=128)
     # Other sample counts and chunk sizes (one block, or many blocks between progress updates): still the
@@ -120,6 +135,13 @@ def test_one_compilation_for_repeated_runs():
     gearte.monte_carlo(study, key=3, n_samples=37, chunk_size=4096)
     gearte.monte_carlo(study, key=4, n_samples=20_000)
     assert len(traces) == 1
+
+
+def test_batched_and_vmapped_samples_agree(random_study):
+    keys = gearte.studies.montecarlo.sample_keys(jax.random.key(5), 0, 256)
+    a = np.asarray(jax.jit(lambda k: random_study.batch(k))(keys))
+    b = np.asarray(jax.jit(lambda k: jax.vmap(random_study)(k))(keys))
+    np.testing.assert_allclose(a, b, rtol=1e-13, atol=0)
 
 
 def test_bad_arguments(random_study):

@@ -19,16 +19,10 @@ jax.config.update("jax_enable_x64", True)
 
 import gearte  # noqa: E402
 from gearte.cli.config import load_study  # noqa: E402
+from gearte.drives import wang2013  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-TOL = {
-    "sun_manufacturing": 13,
-    "planet_manufacturing": 16,
-    "ring_manufacturing": 21,
-    "sun_assembly": 12,
-    "planet_assembly": 8,
-    "carrier_assembly": 15,
-}
+TOL = wang2013.TABLE1_TOLERANCES_UM  # µm, Wang et al. (2013), Table 1
 PHASES = {
     "sun_manufacturing": 0.6,
     "planet_manufacturing": 2.1,

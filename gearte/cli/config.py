@@ -12,7 +12,10 @@ One format for every drive (reference: docs/study-files.md):
 - one table per study kind (``[allocation]``, ``[budget]``, …; see `gearte.cli.kinds`).
 
 Everything is checked here, in Python, before anything is compiled; each message names the
-file, the table, the key and what to write instead.
+file, the table, the key and what to write instead. The checks of the file itself (readable
+UTF-8 TOML, known tables, the ``[study]`` header, a ``[drive]`` table with a ``type``) import
+neither JAX nor the drives, so that `gearte check` answers at once when they fail; the drive,
+its metric, the error laws and the study kinds are JAX objects, and are checked by building them.
 """
 
 from __future__ import annotations
@@ -23,38 +26,27 @@ import math
 import re
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..core.metrics import AbstractMetric
 from ..core.schema import ConfigError, Table, parse_angle
 from ..core.units import ANGLE_UNITS, ARCSEC_PER_RAD
-from ..drives.protocol import AbstractDrive, SourceSpec
-from ..drives.registry import DRIVES
-from ..studies.errors import ErrorModel, ErrorSource
-from ..studies.laws import (
-    AbstractLaw,
-    AbstractPhase,
-    Fixed,
-    FixedPhase,
-    Normal,
-    Optimised,
-    Rayleigh,
-    RelativePhase,
-    Sinusoid,
-    TruncatedNormal,
-    Uniform,
-    UniformPhase,
-)
-from ..studies.montecarlo import DEFAULT_SAMPLES
-from .kinds import STUDY_KINDS
 
-__all__ = ["ConfigError", "Study", "load_study", "parse_angle", "read_toml"]
+if TYPE_CHECKING:
+    from ..core.metrics import AbstractMetric
+    from ..drives.protocol import AbstractDrive, SourceSpec
+    from ..studies.errors import ErrorModel
+    from ..studies.laws import AbstractLaw, AbstractPhase
+
+__all__ = ["ConfigError", "Study", "check_file", "load_study", "parse_angle", "read_toml"]
 
 MAGNITUDE_LAWS = ("fixed", "uniform", "normal", "truncated_normal", "rayleigh")
 VALUE_LAWS = ("fixed", "uniform", "normal", "truncated_normal", "rayleigh", "sinusoid", "random_angle")
 PHASE_RULES = ("uniform", "fixed", "relative", "optimise")
 #: Keys of an angular value: unit suffix → rad per unit.
 ANGLE_SUFFIXES = {"rad": 1.0, "deg": math.pi / 180.0, "arcsec": 1.0 / ARCSEC_PER_RAD, "arcmin": 60.0 / ARCSEC_PER_RAD}
+#: The tables of the study kinds (`gearte.cli.kinds.STUDY_KINDS`, which imports JAX), for the file's
+#: first checks; a test keeps the two in step.
+KIND_TABLES = ("allocation", "budget", "sensitivity", "modification", "doe")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,8 +104,8 @@ def study_header(st: Table, *, samples: int | None, seed: int | None) -> dict:
     name = st.string("name")
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
         raise ConfigError(f"[study] name: use letters, digits, '_', '.', '-' only, got {name!r}")
-    n = st.integer("samples", DEFAULT_SAMPLES, minimum=1)
-    if n >= 2**32:
+    n = st.integer("samples", None, minimum=1) if st.has("samples") else None  # None: the default, set by build_study
+    if n is not None and n >= 2**32:
         raise ConfigError(f"[study] samples: at most 2³² − 1 samples per seed, got {n}")
     s = st.integer("seed", minimum=0)
     if s >= 2**63:
@@ -150,11 +142,9 @@ def load_study(path: str | Path, *, samples: int | None = None, seed: int | None
         raise ConfigError(f"{path}: {e}") from None
 
 
-def build_study(raw: dict, source: str, *, samples: int | None = None, seed: int | None = None) -> Study:
-    """A `Study` from parsed TOML (`source` names it in messages and reports)."""
-    top = Table(raw, "study file")
+def _refuse_unknown_tables(raw: dict, kinds) -> None:
     # Unknown tables first: a misspelt [errors] or [budget] would otherwise be reported as missing.
-    allowed = ["study", "drive", "errors", *(k.table for k in STUDY_KINDS)]
+    allowed = ["study", "drive", "errors", *kinds]
     for k in raw:
         if k not in allowed:
             hint = difflib.get_close_matches(k, allowed, n=1)
@@ -163,10 +153,41 @@ def build_study(raw: dict, source: str, *, samples: int | None = None, seed: int
                 + (f" (did you mean `[{hint[0]}]`?)" if hint else "")
                 + f"; allowed: {', '.join(f'[{a}]' for a in allowed)}"
             )
+
+
+def _read_file(raw: dict, *, samples: int | None, seed: int | None) -> tuple[Table, Table, Table, dict]:
+    """The checks that need no JAX: known tables, the [study] header, a [drive] table naming a type.
+    Returns the top-level, [study] and [drive] tables (still being read) and the header."""
+    _refuse_unknown_tables(raw, KIND_TABLES)
+    top = Table(raw, "study file")
     st = top.table("study")
     h = study_header(st, samples=samples, seed=seed)
-
     dt = top.table("drive")
+    dt.string("type")
+    return top, st, dt, h
+
+
+def check_file(path: str | Path, *, samples: int | None = None, seed: int | None = None) -> None:
+    """The checks of a study file that need no JAX (`load_study` makes them first, then the rest)."""
+    path = Path(path)
+    raw = read_toml(path)
+    try:
+        _read_file(raw, samples=samples, seed=seed)
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}") from None
+
+
+def build_study(raw: dict, source: str, *, samples: int | None = None, seed: int | None = None) -> Study:
+    """A `Study` from parsed TOML (`source` names it in messages and reports)."""
+    top, st, dt, h = _read_file(raw, samples=samples, seed=seed)
+    # Everything from here on builds JAX objects (the drive, its metrics, the error laws, the study kinds).
+    from ..drives.registry import DRIVES
+    from ..studies.montecarlo import DEFAULT_SAMPLES
+    from .kinds import STUDY_KINDS
+
+    _refuse_unknown_tables(raw, (k.table for k in STUDY_KINDS))
+    if h["samples"] is None:
+        h["samples"] = DEFAULT_SAMPLES
     kind = dt.string("type", choices=tuple(DRIVES))
     drive = DRIVES[kind].from_table(dt)
     dt.finish()
@@ -212,6 +233,9 @@ def build_study(raw: dict, source: str, *, samples: int | None = None, seed: int
 
 def read_errors(top: Table, drive: AbstractDrive) -> tuple[ErrorModel, dict[str, float | None]]:
     """The ``[errors.NAME]`` tables: one per declared source (deviations may be left out: fixed at 0)."""
+    from ..studies.errors import ErrorModel, ErrorSource
+    from ..studies.laws import Fixed
+
     specs = drive.error_sources
     et = top.table("errors", {}) if top.has("errors") else Table({}, "[errors]")
     et.where = "[errors]"
@@ -322,6 +346,8 @@ def _length_or_angle(
 
 def _magnitude(t: Table, tol: float | None) -> AbstractLaw:
     """The magnitude law of an eccentricity (µm, ≥ 0)."""
+    from ..studies.laws import Fixed, Normal, Rayleigh, TruncatedNormal, Uniform
+
     law = t.string("law", choices=MAGNITUDE_LAWS)
 
     def need_tol(what: str) -> float:
@@ -371,6 +397,9 @@ def _magnitude(t: Table, tol: float | None) -> AbstractLaw:
 
 def _value(t: Table, spec: SourceSpec, tol: float | None, *, pattern_ok: bool = True) -> AbstractLaw:
     """The law of a signed deviation, in the source's unit (µm, or an angle)."""
+    from ..drives.protocol import SourceSpec
+    from ..studies.laws import Fixed, FixedPhase, Normal, Rayleigh, Sinusoid, TruncatedNormal, Uniform, UniformPhase
+
     law = t.string("law", choices=VALUE_LAWS)
     v = lambda stem, *a, **k: _length_or_angle(t, stem, spec, *a, **k)
     if law == "fixed":
@@ -419,6 +448,8 @@ def _value(t: Table, spec: SourceSpec, tol: float | None, *, pattern_ok: bool = 
 
 
 def _phase(t: Table, specs: dict[str, SourceSpec], by_symbol: dict[str, str]) -> AbstractPhase:
+    from ..studies.laws import FixedPhase, Optimised, RelativePhase, UniformPhase
+
     rule = t.string("rule", choices=PHASE_RULES)
     if rule == "uniform":
         return UniformPhase()

@@ -15,33 +15,13 @@ from .. import __version__
 from ..core.schema import ConfigError
 from ..core.solution import result_name
 from ..core.units import UNIT_SYMBOLS, angle_from_rad
-from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
-from ..identification import assemble_batch, diagnose, identification_problem, read_record, reassemble
+from ..drives.protocol import AbstractGridDrive, AbstractSinusoidalDrive, Eccentricity
+from ..identification import IdentificationProblem, assemble_batch, diagnose, identification_problem, read_record, reassemble
 from ..identification.fit import Z95, _solve
 from ..studies.montecarlo import as_key
 from .config import load_study
+from .identify_grid_cmd import run_identify_grid, summary_header
 from .io import atomic_output_dir, write_json, written_files
-
-
-def add_parsers(sub) -> None:
-    """Register `identify` and `assemble` on the command line's sub-parsers."""
-    p = sub.add_parser("identify", help="identify a drive's errors from a measured TE record (CSV or NPZ)")
-    p.add_argument("config", help="study file (TOML) of the drive")
-    p.add_argument("record", help="measured record: CSV or NPZ (see docs/identification.md)")
-    p.add_argument("--out", required=True, help="results folder (new, empty, or an earlier gearte result)")
-    p.add_argument(
-        "--unit", action="append", default=[], metavar="QUANTITY=UNIT", help="unit of a column named without one, e.g. te=arcsec"
-    )
-    p.add_argument("--input-rpm", type=float, help="input speed, rpm (needed with a time column)")
-    p.add_argument("--ratio", type=float, help="transmission ratio (default: the drive's)")
-    p.add_argument("--adjust", default="", help="comma-separated sources to turn at re-assembly (any angle), e.g. sun_manufacturing")
-    p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's starts")
-    a = sub.add_parser("assemble", help="selective assembly of a batch of measured parts")
-    a.add_argument("parts", help="CSV of parts: source,magnitude_um,phase_rad (or phase_deg), one row per part")
-    a.add_argument("--study", required=True, help="study file (TOML) of the drive")
-    a.add_argument("--out", required=True, help="results folder (new, empty, or an earlier gearte result)")
-    a.add_argument("--seed", type=int, default=0, help="seed of the random start and of the random assemblies")
-    a.add_argument("--random-batches", type=int, default=100, help="random assemblies of the same parts for the comparison")
 
 
 def _units(items: list[str]) -> dict[str, str]:
@@ -57,21 +37,30 @@ def _units(items: list[str]) -> dict[str, str]:
 def _sinusoidal(study, path) -> AbstractSinusoidalDrive:
     if not isinstance(study.drive, AbstractSinusoidalDrive):
         raise ConfigError(
-            f"{path}: [drive] type = {study.drive.type_name!r} computes its TE on a grid; identification and assembly need a drive "
-            "whose TE is a sum of sinusoids (planetary_2kh, harmonic, explicit)"
+            f"{path}: [drive] type = {study.drive.type_name!r} computes its TE on a grid; gearte assemble needs a "
+            "drive whose TE is a sum of sinusoids (planetary_2kh, harmonic, explicit); gearte identify also takes a grid drive's "
+            "study (docs/identification.md, Grid drives)"
         )
     return study.drive
 
 
 def run_identify(args, command: str) -> int:
     study = load_study(args.config)
-    drive = _sinusoidal(study, args.config)
-    given = getattr(drive, "ratio", None)
+    given = getattr(study.drive, "ratio", None)
     ratio = args.ratio if args.ratio is not None else (float(given) if given is not None else None)
+    if isinstance(study.drive, AbstractGridDrive):
+        rec = read_record(args.record, units=_units(args.unit), input_rpm=args.input_rpm, ratio=ratio)
+        return run_identify_grid(args, command, study, rec)
+    if args.fit:
+        raise ValueError(
+            "--fit: only for a grid drive; a sinusoidal drive's identification fits every source (see --adjust for re-assembly)"
+        )
+    drive = _sinusoidal(study, args.config)
     rec = read_record(args.record, units=_units(args.unit), input_rpm=args.input_rpm, ratio=ratio)
     adjust = {s.strip(): None for s in args.adjust.split(",") if s.strip()}
     with atomic_output_dir(args.out, inputs=[args.config, args.record]) as tmp:
         problem = identification_problem(drive, rec)
+        assert isinstance(problem, IdentificationProblem)  # a sinusoidal drive's
         sol = _solve(problem, [np.asarray(rec.te)], as_key(args.seed))
         diag = diagnose(problem, sol, rec)
         alloc = reassemble(drive, sol, adjust=adjust, key=args.seed) if adjust else None
@@ -94,12 +83,7 @@ def run_identify(args, command: str) -> int:
                 }
             )
         summary = {
-            "gearte_version": __version__,
-            "command": command,
-            "study": study.name,
-            "record": str(args.record),
-            "samples": len(rec.te),
-            "revolutions": rec.revolutions,
+            **summary_header(study, args, rec, command),
             "result": result_name(sol.result),
             "unit": unit,
             "residual_rms": float(sol.residual_rms) * conv,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from .allocation_kind import Allocation
 from .budget_kind import Budget
+from .doe_kind import Doe
 from .kind_base import AbstractStudyKind
 from .modification_kind import Modification
 from .sensitivity_kind import Sensitivity
@@ -13,4 +14,5 @@ STUDY_KINDS: tuple[AbstractStudyKind, ...] = (
     Budget(),
     Sensitivity(),
     Modification(),
+    Doe(),
 )

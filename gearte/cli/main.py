@@ -12,20 +12,57 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import json
+import os
 import shlex
 import signal
 import sys
+import warnings
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from .. import __version__
-from ..core.precision import enable_x64
+from ..core.cache import cache_wanted, enable_compilation_cache
 from ..core.schema import ConfigError
-from ..standards.iso1328 import iso1328_tolerances
-from .compare import compare_runs
-from .config import Study, load_study
-from .identify_cmd import add_parsers as _identify_parsers
-from .io import OutputError, check_output, interrupt_received, reset_interrupts, sigterm_as_interrupt
-from .run import CONFIRM_BYTES, CONFIRM_SECONDS, estimate_cost, run_study
+from .io import OutputError, check_output, deferred_interrupts, interrupt_received, reset_interrupts, sigterm_as_interrupt
+
+if TYPE_CHECKING:
+    from .config import Study
+
+# The parser and the file's first checks import neither JAX nor matplotlib: `gearte --help` and a
+# `gearte check` of a broken file answer at once. The modules that compute are imported by the
+# commands that need them (and are reachable here as attributes, e.g. `main.run_study`).
+_LAZY = {
+    "CONFIRM_BYTES": ".run",
+    "CONFIRM_SECONDS": ".run",
+    "estimate_cost": ".run",
+    "run_study": ".run",
+    "compare_runs": ".compare",
+    "load_study": ".config",
+    "check_file": ".config",
+    "iso1328_tolerances": "..standards.iso1328",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(_import(_LAZY[name]), name)
+    globals()[name] = value
+    return value
+
+
+def _import(module: str):
+    """Import a module of gearte (relative to this one). An interrupt meanwhile is remembered, and raised once the
+    import is complete: raised inside an extension's initialisation it would come out as another error, or worse."""
+    with deferred_interrupts():
+        return importlib.import_module(module, __package__)
+
+
+def _lazy(name: str) -> Any:
+    """`name` of this module: what a test put there, else the lazily imported one."""
+    return globals()[name] if name in globals() else __getattr__(name)
 
 
 def _positive_int(text: str) -> int:
@@ -55,7 +92,7 @@ def _overrides(p: argparse.ArgumentParser) -> None:
 
 
 def _study(args) -> Study:
-    study = load_study(args.config, samples=args.samples, seed=args.seed)
+    study = _lazy("load_study")(args.config, samples=args.samples, seed=args.seed)
     if args.chunk_size is not None:
         study = dataclasses.replace(study, chunk_size=args.chunk_size)
     return study
@@ -81,15 +118,19 @@ def _duration(s: float) -> str:
 
 def _confirm(args, study: Study) -> None:
     """Estimate a large run before starting it; refuse one above the thresholds without --yes."""
-    cost = estimate_cost(study)
+    if study.samples <= _import(".run").MEASURE_ABOVE:
+        return  # small enough to start at once (and not worth tracing the study twice)
+    cost = _lazy("estimate_cost")(study)
     if cost.seconds is None:
         return
     where = f"--samples {study.samples:,}" if args.samples is not None else f"{args.config}: [study] samples = {study.samples:,}"
     what = (
         f"about {_duration(cost.seconds)} of Monte Carlo at {cost.rate:,.0f} samples/s on this machine (study kinds not "
         f"included), and {_size(cost.bytes)} of per-sample results held in memory and written to samples.npz"
+        if cost.bytes
+        else f"about {_duration(cost.seconds)} of Monte Carlo at {cost.rate:,.0f} samples/s on this machine, streamed (nothing held per sample)"
     )
-    if cost.seconds > CONFIRM_SECONDS or cost.bytes > CONFIRM_BYTES:
+    if cost.seconds > _lazy("CONFIRM_SECONDS") or cost.bytes > _lazy("CONFIRM_BYTES"):
         if not args.yes:
             raise OutputError(f"{where}: {what}; add --yes to run it anyway, or give fewer samples")
     print(f"gearte: {where}: {what}", file=sys.stderr)
@@ -111,6 +152,29 @@ def _parser() -> argparse.ArgumentParser:
     _overrides(r)
     r.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None, help="progress bar (default: on a terminal)")
     r.add_argument("--yes", action="store_true", help="run even when the estimated time or size is large (asked above 15 min or 2 GiB)")
+    r.add_argument(
+        "--compile-cache",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="keep compiled programs on disk for the next run (default: on; folder: $GEARTE_CACHE_DIR, else ~/.cache/gearte/jax; "
+        "GEARTE_COMPILATION_CACHE=0 also turns it off)",
+    )
+    r.add_argument(
+        "--keep-samples",
+        action="store_true",
+        help="a study streamed for its size (statistics accumulated chunk by chunk) also writes every sample's value to "
+        "samples_te.npy, chunk by chunk; smaller studies always write samples.npz",
+    )
+    d = r.add_argument_group(
+        "several machines (jax.distributed)",
+        "every process runs the same command; each computes its share of the samples, process 0 writes the results",
+    )
+    d.add_argument("--processes", type=_positive_int, help="number of processes (with --process-id and --coordinator)")
+    d.add_argument("--process-id", type=int, help="this process's number, 0 … processes − 1")
+    d.add_argument("--coordinator", help="HOST:PORT of process 0's coordination service")
+    d.add_argument(
+        "--cluster", action="store_true", help="take processes, ids and coordinator from the cluster scheduler's environment (e.g. SLURM)"
+    )
     c = sub.add_parser("compare", help="compare finished runs side by side")
     c.add_argument("runs", nargs="+", help="results folders of `gearte run`")
     c.add_argument("--out", required=True, help="folder for the comparison report (not one of the runs)")
@@ -131,6 +195,28 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--grade", required=True, type=int, help="whole accuracy grade")
     _identify_parsers(sub)
     return p
+
+
+def _identify_parsers(sub) -> None:
+    """Register `identify` and `assemble` on the command line's sub-parsers."""
+    p = sub.add_parser("identify", help="identify a drive's errors from a measured TE record (CSV or NPZ)")
+    p.add_argument("config", help="study file (TOML) of the drive")
+    p.add_argument("record", help="measured record: CSV or NPZ (see docs/identification.md)")
+    p.add_argument("--out", required=True, help="results folder (new, empty, or an earlier gearte result)")
+    p.add_argument(
+        "--unit", action="append", default=[], metavar="QUANTITY=UNIT", help="unit of a column named without one, e.g. te=arcsec"
+    )
+    p.add_argument("--input-rpm", type=float, help="input speed, rpm (needed with a time column)")
+    p.add_argument("--ratio", type=float, help="transmission ratio (default: the drive's)")
+    p.add_argument("--adjust", default="", help="comma-separated sources to turn at re-assembly (any angle), e.g. sun_manufacturing")
+    p.add_argument("--fit", default="", help="grid drives: comma-separated sources to identify (default: all; the others stay at zero)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's starts")
+    a = sub.add_parser("assemble", help="selective assembly of a batch of measured parts")
+    a.add_argument("parts", help="CSV of parts: source,magnitude_um,phase_rad (or phase_deg), one row per part")
+    a.add_argument("--study", required=True, help="study file (TOML) of the drive")
+    a.add_argument("--out", required=True, help="results folder (new, empty, or an earlier gearte result)")
+    a.add_argument("--seed", type=int, default=0, help="seed of the random start and of the random assemblies")
+    a.add_argument("--random-batches", type=int, default=100, help="random assemblies of the same parts for the comparison")
 
 
 def _interrupted(done: bool) -> int:
@@ -173,12 +259,75 @@ def main(argv: list[str] | None = None) -> int:
         reset_interrupts()
 
 
-def _main(argv: list[str] | None) -> int:
-    args = _parser().parse_args(argv)
+def _distributed(args) -> None:
+    """Join the processes of a several-machine run (`jax.distributed`), before JAX computes anything."""
+    given = [getattr(args, k, None) is not None for k in ("processes", "process_id", "coordinator")]
+    cluster = getattr(args, "cluster", False)
+    if not any(given) and not cluster:
+        return
+    if cluster and any(given):
+        raise ConfigError(
+            "--cluster takes the processes from the scheduler: give it alone, or give --processes, --process-id and --coordinator"
+        )
+    if not cluster and not all(given):
+        raise ConfigError("several processes need all three of --processes, --process-id and --coordinator (HOST:PORT)")
+    if not cluster and not 0 <= args.process_id < args.processes:
+        raise ConfigError(f"--process-id must be in 0 … {args.processes - 1}, got {args.process_id}")
+    if not cluster and (":" not in args.coordinator or not args.coordinator.rpartition(":")[2].isdigit()):
+        raise ConfigError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
+    import jax
+
+    # CPU devices of different processes talk through gloo (GPUs use their own collectives).
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    if cluster:
+        jax.distributed.initialize()
+    else:
+        jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.processes, process_id=args.process_id)
+
+
+def _cores_as_devices() -> None:
+    """On a CPU, one XLA device per usable core (`GEARTE_CPU_DEVICES=N` to choose): the Monte Carlo shards its
+    blocks over them (the results are bit-identical for any device count). Only before JAX is imported, and
+    only if `XLA_FLAGS` does not already set the count."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "jax" in sys.modules or "xla_force_host_platform_device_count" in flags:
+        return
+    wanted = os.environ.get("GEARTE_CPU_DEVICES", "").strip()
+    if wanted:
+        if not wanted.isdigit() or int(wanted) < 1:
+            raise ConfigError(f"GEARTE_CPU_DEVICES: a whole number ≥ 1 of CPU devices, got {wanted!r}")
+        count = int(wanted)
+    else:
+        count = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if count > 1:
+        os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={count}".strip()
+
+
+def _setup_jax(args) -> None:
+    """What a computing command sets up first: CPU devices, float64, and the persistent compilation cache."""
+    _cores_as_devices()
+    if args.command == "run":
+        _distributed(args)
+    enable_x64 = _import("..core.precision").enable_x64
+    if args.command != "grade":
+        for module in ("..drives.registry", "..studies.montecarlo", ".kinds"):  # what building a study imports
+            _import(module)
     # gearte's geometry needs float64; the command line turns it on before any array exists.
     enable_x64()
+    if args.command != "grade" and getattr(args, "compile_cache", True) and cache_wanted():
+        enable_compilation_cache()  # a second run of a study compiles nothing (gearte.core.cache)
+        # An unreadable or unwritable cache entry only means compiling again: not the user's concern.
+        warnings.filterwarnings("ignore", message=r"Error (reading|writing) persistent compilation cache entry")
+
+
+def _main(argv: list[str] | None) -> int:
+    args = _parser().parse_args(argv)
+    if args.command == "check":
+        # The file's own checks first, without JAX: a broken file is named at once.
+        _lazy("check_file")(args.config, samples=args.samples, seed=args.seed)
+    _setup_jax(args)
     if args.command == "grade":
-        tol = iso1328_tolerances(
+        tol = _lazy("iso1328_tolerances")(
             standard=args.standard,
             module=args.module,
             diameter=args.diameter,
@@ -207,19 +356,29 @@ def _main(argv: list[str] | None) -> int:
         )
         return 0
     if args.command in ("identify", "assemble"):
-        from . import identify_cmd
-
+        identify_cmd = _import(".identify_cmd")
         command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
         return (identify_cmd.run_identify if args.command == "identify" else identify_cmd.run_assemble)(args, command)
     if args.command == "compare":
-        compare_runs(args.runs, args.out)
+        _lazy("compare_runs")(args.runs, args.out)
         print(f"comparison written to {args.out}/report.md")
         return 0
     study = _study(args)
     check_output(args.out, inputs=[args.config])  # before anything is computed
     _confirm(args, study)
     command = "gearte " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
-    summary = run_study(study, args.out, progress=args.progress, command=command, inputs=[args.config])
+    import jax
+
+    if jax.process_index() != 0:
+        # Another process of a several-machine run: it computes its share; process 0 writes the results.
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="gearte-process-") as scratch:
+            _lazy("run_study")(study, Path(scratch) / "out", progress=False, command=command, keep_samples=False)
+        return 0
+    summary = _lazy("run_study")(
+        study, args.out, progress=args.progress, command=command, inputs=[args.config], keep_samples=args.keep_samples
+    )
     te = summary["te"]
     sym = {"arcsec": "″", "arcmin": "′", "urad": " µrad", "pairs": " pairs"}[te["unit"]]
     print(

@@ -24,12 +24,17 @@ def _symbol(unit: str) -> str:
     return UNIT_SYMBOLS.get(unit, f" {unit}")
 
 
-def histogram(values, stats, *, unit: str, metric: str, title: str, path, bins: int = 80, estimate: float | None = None):
-    """TE histogram with its statistics written on it."""
+def histogram(values, stats, *, unit: str, metric: str, title: str, path, bins: int = 80, estimate: float | None = None, counts=None):
+    """TE histogram with its statistics written on it: of the `values`, or, for a study streamed without its
+    samples, ``counts=(edges, counts)`` (`gearte.studies.streaming.StreamingStatistics.histogram`)."""
     sym = _symbol(unit)
     fig = Figure(figsize=(8, 4.8), dpi=110)
     ax = fig.subplots()
-    ax.hist(values, bins=bins, color="#4477aa", alpha=0.85, edgecolor="white", linewidth=0.3)
+    if counts is not None:
+        edges, c = counts
+        ax.stairs(c, edges, fill=True, color="#4477aa", alpha=0.85)
+    else:
+        ax.hist(values, bins=bins, color="#4477aa", alpha=0.85, edgecolor="white", linewidth=0.3)
     for p, style in (("5", ":"), ("50", "--"), ("95", ":"), ("99.73", "-.")):
         ax.axvline(stats.percentiles[p], color="#222222", linestyle=style, linewidth=1.0, label=f"P{p} = {stats.percentiles[p]:.1f}{sym}")
     if estimate is not None:

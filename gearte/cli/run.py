@@ -11,28 +11,30 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import importlib
+import importlib.metadata
 import math
 import platform
+import threading
 import time
 from pathlib import Path
 
 import equinox
 import jax
 import numpy as np
-import optimistix
 
 from .. import __version__
 from ..core.metrics import AbstractMetric
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
-from ..drives.protocol import AbstractStudyContext, Figure
+from ..drives.protocol import AbstractDrive, AbstractSinusoidalDrive, AbstractStudyContext, Figure, StudyOutputs
 from ..studies.errors import ErrorModel, ErrorSource
 from ..studies.laws import FixedPhase, Optimised
 from ..studies.montecarlo import PERCENTILES, TEStudy, as_key, default_block_size, monte_carlo, statistics
-from . import plots
+from ..studies.streaming import StreamingStatistics
 from .config import Study
 from .io import atomic_output_dir, commit_point, write_json, written_files
 from .kind_base import Finish, KindOutcome
 from .kinds import STUDY_KINDS
+from .samples_file import SamplesWriter
 
 
 def versions() -> dict:
@@ -41,7 +43,7 @@ def versions() -> dict:
         "gearte": __version__,
         "jax": jax.__version__,
         "equinox": equinox.__version__,
-        "optimistix": optimistix.__version__,
+        "optimistix": importlib.metadata.version("optimistix"),
         "numpy": np.__version__,
         "python": platform.python_version(),
     }
@@ -79,6 +81,15 @@ class _RunSample(equinox.Module):
         response = self.study.drive.response(errors)
         return self.metric(self.study.drive, response), self.study.drive.sample_outputs(errors, response)
 
+    def batch(self, keys):
+        """The samples of `keys` at once (see `TEStudy.batch`): a sinusoidal drive's metric on the whole batch."""
+        drive = self.study.drive
+        if not isinstance(drive, AbstractSinusoidalDrive):
+            return jax.vmap(self)(keys)
+        errors = jax.vmap(self.study.errors.sample)(keys)
+        response = jax.vmap(drive.response)(errors)
+        return self.metric(drive, response), jax.vmap(drive.sample_outputs)(errors, response)
+
     def bytes_per_sample(self) -> int:
         return self.study.bytes_per_sample()
 
@@ -88,11 +99,17 @@ def _trace_in_unit(study: Study, index: int) -> tuple[np.ndarray, np.ndarray]:
     return tr.theta / (2 * math.pi), np.asarray(angle_from_rad(tr.te, study.unit))
 
 
+def _plots():
+    from . import plots  # matplotlib: imported when the first plot is drawn
+
+    return plots
+
+
 def _draw(figure: Figure, folder: Path) -> None:
     """Draw a declared figure: `plot` names a function of `gearte.cli.plots`, or ``"module:function"`` (a drive's
     own plots module beside it, e.g. ``"gearte.drives.cycloid_pin_plots:rotation_error"``)."""
     module, _, name = figure.plot.rpartition(":")
-    fn = getattr(importlib.import_module(module) if module else plots, name, None)
+    fn = getattr(importlib.import_module(module) if module else _plots(), name, None)
     if fn is None:
         raise ValueError(f"figure {figure.filename}: no plot function {figure.plot!r}")
     fn(**figure.data, path=folder / figure.filename)
@@ -103,6 +120,9 @@ MEASURE_ABOVE = 1_000_000
 #: Estimated Monte Carlo time (s) and per-sample results (bytes) above which `gearte run` asks for --yes.
 CONFIRM_SECONDS = 15 * 60
 CONFIRM_BYTES = 2 * 2**30
+#: Per-sample results (bytes) above which a plain study (no study kinds, no per-sample drive outputs) is
+#: streamed: statistics accumulated chunk by chunk (`gearte.studies.streaming`), nothing held per sample.
+HOLD_BYTES = 64 * 2**20
 
 
 @dataclasses.dataclass(frozen=True)
@@ -137,7 +157,7 @@ def estimate_cost(study: Study, *, measure_above: int | None = None) -> Cost:
     fn = _sampler(_phases_to_choose_held(study))
     shapes = jax.eval_shape(fn, as_key(0))
     per = 3 * 8 + sum(int(np.prod(x.shape)) * x.dtype.itemsize for x in jax.tree.leaves(shapes[1]))  # te, te_rad, index
-    nbytes = per * study.samples
+    nbytes = 0 if _streams(study) else per * study.samples
     if study.samples <= (MEASURE_ABOVE if measure_above is None else measure_above):
         return Cost(study.samples, nbytes)
     # The smallest compiled call (two blocks), run twice: the second is timed.
@@ -156,6 +176,7 @@ def run_study(
     progress: bool | None = None,
     command: str | None = None,
     inputs: tuple[str | Path, ...] | list[str | Path] = (),
+    keep_samples: bool = False,
 ) -> dict:
     """Run `study` and write its results folder `out` atomically. Returns the summary dict.
 
@@ -164,13 +185,78 @@ def run_study(
     beside it that replaces it only when complete.
     """
     with atomic_output_dir(out, inputs=(study.source_path, *inputs)) as tmp:
-        summary = _run(study, tmp, progress=progress, command=command)
+        summary = _run(study, tmp, progress=progress, command=command, keep_samples=keep_samples)
         commit_point()
     return summary
 
 
-def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None) -> dict:
+def _streams(study: Study) -> bool:
+    """Whether `gearte run` streams this study: a plain study (no study kinds, and a drive with neither per-sample
+    outputs nor study outputs of its own) whose per-sample results would exceed `HOLD_BYTES`. Decided from the
+    drive's class, without tracing the study."""
+    drive = type(study.drive)
+    plain = not study.kinds and drive.sample_outputs is AbstractDrive.sample_outputs and drive.study_outputs is AbstractDrive.study_outputs
+    return plain and 3 * 8 * study.samples > HOLD_BYTES
+
+
+def _one_value(sampler: _RunSample, study: Study, index: int, angle: bool) -> float:
+    """The metric of sample `index` alone (its key regenerated), in the study's unit."""
+    v, _ = equinox.filter_jit(sampler)(jax.random.fold_in(as_key(study.seed), index))
+    return float(angle_from_rad(v, study.unit)) if angle else float(v)
+
+
+def _monte_carlo_streamed(study: Study, sampler: _RunSample, tmp: Path, *, progress: bool | None, keep_samples: bool):
+    """The study's Monte Carlo with nothing held per sample: exact n, min, max, mean and std, percentiles from a
+    mergeable histogram sketch with their error bounds, a histogram for the plot, and the typical sample (the first
+    sample in the sketch's bin of the median); with `keep_samples`, the values written to ``samples_te.npy`` chunk by
+    chunk."""
+    angle = study.metric.quantity == "angle"
+    unit = study.unit if angle else "pairs"
+    acc = StreamingStatistics()
+    writer = SamplesWriter(tmp / "samples_te.npy", study.samples) if keep_samples else None
+
+    def on_chunk(start: int, vals) -> None:
+        te_rad, _ = vals
+        v = np.asarray(angle_from_rad(te_rad, study.unit) if angle else te_rad, dtype=np.float64)
+        acc.update(v)
+        if writer is not None:
+            writer.write(v)
+        commit_point()
+
+    block = default_block_size(sampler.bytes_per_sample())
+    chunk = study.chunk_size or 64 * block
+    try:
+        mc = monte_carlo(
+            sampler,
+            key=study.seed,
+            n_samples=study.samples,
+            chunk_size=chunk,
+            progress=progress,
+            desc=study.name,
+            keep=False,
+            on_chunk=on_chunk,
+        )
+    except BaseException:
+        if writer is not None:
+            writer.close(complete=False)
+        raise
+    if writer is not None:
+        writer.close()
+    stats = acc.statistics(unit=unit)
+    summary = {
+        "method": "streamed: nothing held per sample; n, min, max, mean, std exact (blockwise, merged pairwise); "
+        f"percentiles from a histogram of the values' top {acc.bits} mantissa bits, each within its stated bound",
+        "percentile_error_bounds": acc.quantile_errors(),
+        "typical_sample": "the first sample in the sketch bin of the median",
+        "samples_file": "samples_te.npy" if keep_samples else None,
+    }
+    return mc, stats, acc.sample_near(stats.percentiles["50"]), summary, acc.histogram(80)
+
+
+def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None, keep_samples: bool = False) -> dict:
     t_start = time.perf_counter()
+    # The plots' library loads in the background while the Monte Carlo computes (XLA releases the GIL).
+    threading.Thread(target=importlib.import_module, args=("matplotlib.figure",), daemon=True).start()
     original = study
     outcomes: list[KindOutcome] = []
     for kind in STUDY_KINDS:
@@ -180,24 +266,25 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None)
             commit_point()  # an interrupt swallowed while compiling stops the run at the next phase
             study = outcome.study
     commit_point()
-    mc = monte_carlo(
-        _sampler(study),
-        key=study.seed,
-        n_samples=study.samples,
-        chunk_size=study.chunk_size,
-        progress=progress,
-        desc=study.name,
-    )
-    values_rad, outputs = mc.values
+    sampler = _sampler(study)
     angle = study.metric.quantity == "angle"
-    values = angle_from_rad(values_rad, study.unit) if angle else values_rad
     unit = study.unit if angle else "pairs"
-    stats = statistics(values, unit=unit)
+    streamed = _streams(study)
+    if streamed:
+        mc, stats, typical, stream_summary, hist = _monte_carlo_streamed(study, sampler, tmp, progress=progress, keep_samples=keep_samples)
+        values = values_rad = None
+        outputs: dict = {}
+    else:
+        mc = monte_carlo(sampler, key=study.seed, n_samples=study.samples, chunk_size=study.chunk_size, progress=progress, desc=study.name)
+        values_rad, outputs = mc.values
+        values = angle_from_rad(values_rad, study.unit) if angle else values_rad
+        stats = statistics(values, unit=unit)
+        # A typical sample (closest to the median) for the TE trace; its draws are regenerated from its key.
+        typical = int(np.argmin(np.abs(values - stats.percentiles["50"])))
+        stream_summary, hist = None, None
     sym = UNIT_SYMBOLS[study.unit]
-
-    # A typical sample (closest to the median) for the TE trace; its draws are regenerated from its key.
-    typical = int(np.argmin(np.abs(values - stats.percentiles["50"])))
     errs = sample_errors(study, typical)
+    typical_value = float(values[typical]) if values is not None else _one_value(sampler, study, typical, angle)
     tr = study.drive.trace(errs)
     te_trace = np.asarray(angle_from_rad(tr.te, study.unit))
     mx, mn = float(angle_from_rad(tr.max, study.unit)), float(angle_from_rad(tr.min, study.unit))
@@ -231,7 +318,7 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None)
         },
         "typical_sample": {
             "index": typical,
-            "te": float(values[typical]),
+            "te": typical_value,
             "hyper_period_input_revs": tr.span_revs,
             "max": mx,
             "min": mn,
@@ -247,9 +334,13 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None)
             "notes": list(study.notes),
         },
         "timing_s": {"monte_carlo": mc.seconds, "total": None},
+        "devices": mc.devices,
+        "processes": jax.process_count(),
         "versions": versions(),
         "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
     }
+    if stream_summary is not None:
+        summary["streamed"] = stream_summary
     figures: list[Figure] = []
     for o in outcomes:
         summary[o.key] = o.summary
@@ -262,7 +353,8 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None)
         summary["study"]["source_rules"] = {n: s.phase.describe() for n, s in original.errors.sources.items() if s.phase is not None}
 
     commit_point()
-    extra = study.drive.study_outputs(RunContext(study, values_rad, outputs, progress))
+    # A streamed study is a plain one (`_streams`): its drive has no study outputs of its own.
+    extra = StudyOutputs() if values_rad is None else study.drive.study_outputs(RunContext(study, values_rad, outputs, progress))
     commit_point()
     clash = set(extra.summary) & set(summary)
     if clash:
@@ -272,24 +364,34 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None)
 
     for f in figures:
         _draw(f, tmp)
-    arrays = {
-        "te": values,
-        "te_rad": values_rad,
-        "unit": unit,
-        "metric": study.metric.name,
-        "seed": study.seed,
-        "index": np.arange(study.samples),
-    } | dict(extra.arrays)
-    np.savez_compressed(tmp / "samples.npz", **arrays)
+    if not streamed:
+        arrays = {
+            "te": values,
+            "te_rad": values_rad,
+            "unit": unit,
+            "metric": study.metric.name,
+            "seed": study.seed,
+            "index": np.arange(study.samples),
+        } | dict(extra.arrays)
+        # Stored, not compressed: per-sample values do not compress (about 5 %), and deflating them costs a second per 10⁶.
+        np.savez(tmp / "samples.npz", **arrays)
     for name, content in extra.files.items():
         np.savez_compressed(tmp / name, **content)
-    plots.histogram(values, stats, unit=study.unit, metric=study.metric.label, title=study.title, path=tmp / "histogram.png")
-    plots.trace(
+    _plots().histogram(
+        values,
+        stats,
+        unit=study.unit,
+        metric=study.metric.label,
+        title=study.title,
+        path=tmp / "histogram.png",
+        counts=hist,
+    )
+    _plots().trace(
         tr.theta / (2 * math.pi),
         te_trace,
         unit=study.unit,
         path=tmp / "trace.png",
-        title=f"TE of a typical sample (#{typical}, {study.metric.name} {values[typical]:.1f}{sym if angle else ''}) "
+        title=f"TE of a typical sample (#{typical}, {study.metric.name} {typical_value:.1f}{sym if angle else ''}) "
         f"over {tr.span_revs} input revolutions",
         marks=[(tr.theta_max / (2 * math.pi), mx, f"max {mx:.1f}{sym}"), (tr.theta_min / (2 * math.pi), mn, f"min {mn:.1f}{sym}")],
     )
@@ -298,6 +400,20 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None)
     for o in outcomes:
         text += "\n".join(o.report(summary))
     text += "\n".join(extra.report) + ("\n" if extra.report else "")
+    if stream_summary is not None:
+        bounds = ", ".join(f"P{p} ±{b:.3g}{sym if angle else ''}" for p, b in stream_summary["percentile_error_bounds"].items())
+        text += (
+            "\n## Streamed study\n\n"
+            f"{study.samples:,} samples were summarised chunk by chunk without holding them: n, min, max, mean and std are "
+            f"exact; the percentiles come from a histogram of the values' top {StreamingStatistics().bits} mantissa bits and "
+            f"are each within its bound ({bounds}). The typical sample is the first one in the histogram bin of the median."
+            + (
+                " Every sample's value is in `samples_te.npy`."
+                if stream_summary["samples_file"]
+                else " No per-sample file was written (`--keep-samples` writes one)."
+            )
+            + "\n"
+        )
     (tmp / "report.md").write_text(text, encoding="utf-8")
     summary["files"] = written_files(tmp, "summary.json")  # what gearte wrote here: a later run replaces only these
     write_json(tmp / "summary.json", summary)

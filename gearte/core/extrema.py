@@ -1,11 +1,11 @@
 """Exact extrema of a TE signal over its hyper-period, and the peak, peak-to-peak, RMS and spectrum functions.
 
-Exact extrema (≤ 1e-6 relative, in practice ~1e-12): the signal is sampled on a
-grid of ``oversample`` points per period of its highest order; the best local
-maxima (ranked by the parabola through each grid maximum and its neighbours, one
-per half-period block) are refined by safeguarded Newton steps on the trigonometric polynomial itself,
-round after round until a rigorous bound shows that no unrefined block can hold a
-better extremum. The
+Exact extrema (≤ 1e-6 relative, in practice ~1e-14): the signal is sampled in float32 on a
+grid of ``oversample`` points per period of its highest order; the blocks (half the shortest
+period) with the best grid maxima are re-evaluated in float64 and refined by safeguarded Newton
+steps on the trigonometric polynomial itself, round after round until a rigorous bound (grid
+spacing, curvature and float32 rounding) shows that no unrefined block can hold a better
+extremum (see `_locate_extrema`). The
 search runs on stopped gradients; the value is then re-evaluated at the located
 angle, so by the envelope theorem its gradient is exact and finite, also at
 zero amplitude and at ties (where it is a valid subgradient).
@@ -95,12 +95,20 @@ def _derivatives(signal: TESignal, tau: Array) -> tuple[Array, Array, Array]:
     return f, f1, f2
 
 
+def _argmax(x: Array) -> Array:
+    """`jnp.argmax` over the last axis (first of ties) as a maximum and a minimum: two plain
+    reductions, which the CPU vectorises, rather than one reduction over (value, index) pairs."""
+    n = x.shape[-1]
+    hit = x == jnp.max(x, axis=-1, keepdims=True)
+    return jnp.min(jnp.where(hit, jnp.arange(n), n), axis=-1)
+
+
 def _top_indices(score: Array, c: int) -> Array:
     """Indices of the `c` largest entries of the last axis (repeated argmax: cheap on CPU, unlike sorting)."""
     pos = jnp.arange(score.shape[-1])
     out = []
     for _ in range(min(c, score.shape[-1])):
-        i = jnp.argmax(score, axis=-1)
+        i = _argmax(score)
         out.append(i)
         score = jnp.where(pos == i[..., None], -jnp.inf, score)
     return jnp.stack(out, axis=-1)
@@ -137,83 +145,151 @@ def _candidates(g: Array, sign: float, block: int, candidates: int) -> tuple[Arr
     return jnp.take_along_axis(idx, best, axis=-1), jnp.take_along_axis(delta, best, axis=-1)
 
 
+def _cis_small(t: Array, terms: int = 10) -> tuple[Array, Array]:
+    """cos t, sin t for small |t| (≤ 0.5 rad) by their Taylor series, Horner in t².
+
+    Polynomials vectorise on the CPU, unlike float64 sine and cosine calls; with 10 terms the
+    truncation error is below t²¹/21! ≈ 2e-26 at |t| = 0.5.
+    """
+    t2 = t * t
+    c = jnp.ones_like(t)
+    s = jnp.ones_like(t)
+    for n in range(terms, 0, -1):
+        c = 1.0 - t2 * c / ((2 * n - 1) * (2 * n))
+        s = 1.0 - t2 * s / ((2 * n) * (2 * n + 1))
+    return c, t * s
+
+
 def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_steps: int) -> tuple[Array, Array]:
     """τ of the maximum and of the minimum of the signal over [0, 2π), certified.
 
-    Rounds of `candidates` blocks per direction, best-ranked first, are refined by Newton's
-    method until no unrefined block can hold a better extremum: the true maximum lies within
-    h/2 of a grid point and has f' = 0, so it exceeds that block's grid maximum by at most
-    h²/8 · max|f''| ≤ h²/8 · Σ k²|c_k|. One round settles almost every signal; near-ties
-    (e.g. a slow modulation of a fast pattern) take more.
+    1. **Grid, float32.** The signal on ``m`` grid points (`grid_size`), evaluated in float32 from
+       float64 coefficients; its maximum and minimum per block of half the shortest period. The
+       float32 rounding error is bounded by ``(2K + 4) u (|c₀| + Σ|a_k| + |b_k|)`` (K orders, u = 2⁻²⁴)
+       and added to the certification margin below, so float32 ranks blocks but never decides.
+    2. **Refinement, float64.** The maximum and the minimum are searched as one problem over 2B
+       rows (row r + B is −row r). Each round takes the `candidates` best-ranked unrefined blocks
+       of a row, re-evaluates those blocks (and one neighbour each side) in float64, starts from
+       the parabola vertex at each block's best point and takes safeguarded Newton steps on the
+       trigonometric polynomial written about that grid point (local coefficients from the
+       tabulated cos kτᵢ, sin kτᵢ; cos kt, sin kt of the small offset t from a Taylor series and
+       repeated squaring). Every point visited is an exact evaluation and the best one wins.
+    3. **Certificate.** The true maximum lies within h/2 of a grid point and has f′ = 0, so it
+       exceeds that block's grid maximum by at most h²/8 · max|f″| ≤ h²/8 · Σ k²|c_k| (+ the
+       float32 bound). Rounds continue until no unrefined block can hold a better extremum; one
+       round settles almost every signal, near-ties take more.
     """
-    m = grid_size(signal.orders, oversample)
+    orders = signal.orders
+    n_orders = len(orders)
+    m = grid_size(orders, oversample)
     block = max(1, oversample // 2)
+    nb = m // block
     h = _TWO_PI / m
-    cos_b, sin_b = _basis(signal.orders, m, wrap=True)
-    g = _grid_values(signal, cos_b, sin_b)
-    k = jnp.asarray(signal.orders, dtype=float)
-    margin = h * h / 8.0 * jnp.sum(k * k * jnp.sqrt(signal.cos_coef**2 + signal.sin_coef**2), axis=-1)
-    idx_x, d_x, s_x, top_x = _block_scores(g, 1.0, block)
-    idx_n, d_n, s_n, top_n = _block_scores(g, -1.0, block)
-    idx = jnp.concatenate([idx_x, idx_n], axis=-1)
-    delta = jnp.concatenate([d_x, d_n], axis=-1)
-    score = jnp.concatenate([s_x, s_n], axis=-1)
-    top = jnp.concatenate([top_x, top_n], axis=-1)
-    nb = idx_x.shape[-1]
-    c = min(candidates, nb)
-    sign_of = lambda sel: jnp.where(sel < nb, 1.0, -1.0)
+    k = np.asarray(orders, dtype=np.float64)
+    kt = np.outer(k, _TWO_PI * np.arange(m) / m)
+    cos_tab, sin_tab = np.cos(kt), np.sin(kt)  # (K, m)
+    batch = signal.offset.shape
+    a = signal.cos_coef.reshape(-1, n_orders)
+    b = signal.sin_coef.reshape(-1, n_orders)
+    off = signal.offset.reshape(-1)
+    n = a.shape[0]
+    rows = 2 * n
 
-    def refine(sel):
-        # Safeguarded Newton from the parabola vertex; every point visited is an exact evaluation
-        # and the best one wins, so a stray step cannot lose accuracy.
-        sgn = sign_of(sel)
-        tau = (jnp.take_along_axis(idx, sel, axis=-1).astype(delta.dtype) + jnp.take_along_axis(delta, sel, axis=-1)) * h
-        taus, vals = [], []
+    # 1. float32 grid (unrolled over orders: an elementwise sum whose order never changes with batch size).
+    f32 = jnp.float32
+    g = off[:, None].astype(f32)
+    for j in range(n_orders):
+        g = g + a[:, j, None].astype(f32) * cos_tab[j].astype(np.float32) + b[:, j, None].astype(f32) * sin_tab[j].astype(np.float32)
+    g = g.reshape(n, nb, block)
+    top = jnp.concatenate([jnp.max(g, axis=-1), -jnp.min(g, axis=-1)])  # (2B, nb), float32: ranks blocks
+
+    sgn = jnp.concatenate([jnp.ones(n, dtype=a.dtype), -jnp.ones(n, dtype=a.dtype)])
+    a2 = sgn[:, None] * jnp.concatenate([a, a])
+    b2 = sgn[:, None] * jnp.concatenate([b, b])
+    off2 = sgn * jnp.concatenate([off, off])
+    u32 = float(np.finfo(np.float32).eps) / 2.0
+    rounding = (2 * n_orders + 4) * 1.01 * u32 * (jnp.abs(off2) + jnp.sum(jnp.abs(a2) + jnp.abs(b2), axis=-1))
+    margin = h * h / 8.0 * jnp.sum(k * k * jnp.sqrt(a2**2 + b2**2), axis=-1) + rounding
+    c = min(candidates, nb)
+    cos_pt, sin_pt = jnp.asarray(cos_tab.T), jnp.asarray(sin_tab.T)  # (m, K): cos kτᵢ, sin kτᵢ
+    # cos kτ_s, sin kτ_s at the offsets s h, s = 0 … block + 1, of a block's window from its first point.
+    ks = np.outer(np.arange(block + 2) * h, k)
+    cos_w, sin_w = jnp.asarray(np.cos(ks)), jnp.asarray(np.sin(ks))  # (block + 2, K)
+
+    def refine(rem, top_r, a_r, b_r, off_r):
+        """Refine the `c` best unrefined blocks of the rows given: (blocks taken, τ, value) per row."""
+        sel = _top_indices(jnp.where(rem, top_r, -jnp.inf), c)  # (r, c) blocks
+        p0 = (sel * block - 1) % m  # the window starts one point before the block
+        cp, sp = cos_pt[p0], sin_pt[p0]  # (r, c, K)
+        # f(τ_{p0} + t) = c₀ + Σ A_k cos kt + B_k sin kt  (coefficients about the window's first point).
+        # Sums over the few orders are unrolled: elementwise fusions, far cheaper on the CPU than reductions.
+        big_a = [a_r[:, None, q] * cp[..., q] + b_r[:, None, q] * sp[..., q] for q in range(n_orders)]
+        big_b = [b_r[:, None, q] * cp[..., q] - a_r[:, None, q] * sp[..., q] for q in range(n_orders)]
+        w = off_r[:, None, None]
+        for q in range(n_orders):
+            w = w + big_a[q][..., None] * cos_w[:, q] + big_b[q][..., None] * sin_w[:, q]  # float64 window
+        j = _argmax(w[..., 1:-1])  # the block's best point, float64
+        fm = jnp.take_along_axis(w, j[..., None], axis=-1)[..., 0]
+        fc = jnp.take_along_axis(w, j[..., None] + 1, axis=-1)[..., 0]
+        fp = jnp.take_along_axis(w, j[..., None] + 2, axis=-1)[..., 0]
+        d1 = fm - fp
+        denom = fm - 2.0 * fc + fp
+        curved = denom < 0.0
+        t = h * (1.0 + j.astype(w.dtype) + jnp.where(curved, jnp.clip(0.5 * d1 / jnp.where(curved, denom, -1.0), -0.5, 0.5), 0.0))
+        best_t, best_v = t, None
         for step_no in range(newton_steps + 1):
-            fv, f1, f2 = _derivatives(signal, tau)
-            taus.append(tau)
-            vals.append(sgn * fv)
+            c1, s1 = _cis_small(t)
+            ck, sk = _cis_powers(c1, s1, orders)  # (r, c, K)
+            fv, f1, f2 = off_r[:, None], 0.0, 0.0
+            for q, kq in enumerate(orders):
+                even = big_a[q] * ck[..., q] + big_b[q] * sk[..., q]
+                fv = fv + even
+                f1 = f1 + kq * (big_b[q] * ck[..., q] - big_a[q] * sk[..., q])
+                f2 = f2 - kq * kq * even
+            # The best point visited so far (the first of equals): no stacking of the steps, which XLA
+            # would fuse by recomputing every step once per output.
+            if best_v is None:
+                best_v = fv
+            else:
+                better = fv > best_v
+                best_t, best_v = jnp.where(better, t, best_t), jnp.where(better, fv, best_v)
             if step_no == newton_steps:
                 break
-            concave = sgn * f2 < 0.0
-            step = jnp.where(concave, -f1 / jnp.where(concave, f2, 1.0), 0.0)
-            tau = tau + jnp.clip(step, -h, h)
-        return jnp.stack(taus, axis=-1), jnp.stack(vals, axis=-1)  # (..., picks, steps + 1)
-
-    def pick(remaining):
-        # The c best-ranked unrefined blocks of each direction.
-        def top_c(lo):
-            part = jnp.where(remaining[..., lo : lo + nb], score[..., lo : lo + nb], -jnp.inf)
-            return _top_indices(part, c) + lo
-
-        return jnp.concatenate([top_c(0), top_c(nb)], axis=-1)
-
-    def absorb(state, sel):
-        remaining, best_tau, best_val = state
-        taus, vals = refine(sel)
-        remaining = remaining & ~jnp.any(jnp.arange(2 * nb) == sel[..., :, None], axis=-2)
-        out_tau, out_val = [], []
-        for d, (lo, hi) in enumerate(((0, c), (c, 2 * c))):
-            t = taus[..., lo:hi, :].reshape(taus.shape[:-2] + (-1,))
-            v = vals[..., lo:hi, :].reshape(vals.shape[:-2] + (-1,))
-            j = jnp.argmax(v, axis=-1)
-            v_new = jnp.take_along_axis(v, j[..., None], axis=-1)[..., 0]
-            t_new = jnp.take_along_axis(t, j[..., None], axis=-1)[..., 0]
-            better = v_new > best_val[..., d]
-            out_tau.append(jnp.where(better, t_new, best_tau[..., d]))
-            out_val.append(jnp.where(better, v_new, best_val[..., d]))
-        return remaining, jnp.stack(out_tau, axis=-1), jnp.stack(out_val, axis=-1)
+            concave = f2 < 0.0
+            t = t + jnp.clip(jnp.where(concave, -f1 / jnp.where(concave, f2, 1.0), 0.0), -h, h)
+        assert best_v is not None
+        best = _argmax(best_v)[:, None]  # the best candidate (the first of equals)
+        tau_new = jnp.take_along_axis(best_t + p0.astype(w.dtype) * h, best, axis=-1)[:, 0]
+        v_new = jnp.take_along_axis(best_v, best, axis=-1)[:, 0]
+        taken = jnp.any(jnp.arange(nb) == sel[..., None], axis=-2)
+        return taken, tau_new, v_new
 
     def uncertified(state):
         remaining, _, best_val = state
-        bound = jnp.where(remaining, top, -jnp.inf) + margin[..., None]
-        return (jnp.max(bound[..., :nb], axis=-1) > best_val[..., 0]) | (jnp.max(bound[..., nb:], axis=-1) > best_val[..., 1])
+        return jnp.max(jnp.where(remaining, top, -jnp.inf), axis=-1).astype(best_val.dtype) + margin > best_val
 
-    batch = g.shape[:-1]
-    init = (jnp.ones(batch + (2 * nb,), dtype=bool), jnp.zeros(batch + (2,)), jnp.full(batch + (2,), -jnp.inf))
-    state = absorb(init, pick(init[0]))
-    state = jax.lax.while_loop(lambda st: jnp.any(uncertified(st)), lambda st: absorb(st, pick(st[0])), state)
-    return state[1][..., 0], state[1][..., 1]
+    # Round one: every row.
+    taken, tau, val = refine(jnp.ones((rows, nb), dtype=bool), top, a2, b2, off2)
+    state = (~taken, tau, val)
+
+    # Later rounds (near-ties: a few rows in ten thousand): only the rows still uncertified, `few` at
+    # a time, gathered, refined and scattered back, so a rare row does not cost a round of the batch.
+    few = min(rows, 32)
+
+    def later_round(st):
+        remaining, best_tau, best_val = st
+        pick = jnp.nonzero(uncertified(st), size=few, fill_value=rows)[0]  # rows (index `rows` = none)
+        safe = jnp.minimum(pick, rows - 1)
+        taken, t_new, v_new = refine(remaining[safe], top[safe], a2[safe], b2[safe], off2[safe])
+        better = v_new > best_val[safe]
+        remaining = remaining.at[pick].set(remaining[safe] & ~taken, mode="drop")
+        best_tau = best_tau.at[pick].set(jnp.where(better, t_new, best_tau[safe]), mode="drop")
+        best_val = best_val.at[pick].set(jnp.where(better, v_new, best_val[safe]), mode="drop")
+        return remaining, best_tau, best_val
+
+    state = jax.lax.while_loop(lambda st: jnp.any(uncertified(st)), later_round, state)
+    tau = state[1]
+    return tau[:n].reshape(batch), tau[n:].reshape(batch)
 
 
 # Compiled once per signal structure (orders) and options, also when called eagerly: the
@@ -221,7 +297,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
 _locate_extrema_jit = eqx.filter_jit(_locate_extrema)
 
 
-def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 3, newton_steps: int = 1) -> Extrema:
+def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 2, newton_steps: int = 1) -> Extrema:
     """Exact maximum and minimum of the TE over the whole hyper-period.
 
     **Arguments:**

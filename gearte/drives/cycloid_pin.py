@@ -464,6 +464,10 @@ class CycloidPin(AbstractGridDrive):
         thetas = self.input_angles()
         return _sweep_jit(self, err, thetas, False)
 
+    def te(self, response: Clearances) -> Float[Array, " p"]:
+        """The rotation error under a forward load (rad) at each angle of `input_angles`: the stage's TE."""
+        return response.rotation_error
+
     @property
     def metrics(self) -> dict[str, AbstractMetric]:
         return {m.name: m() for m in METRICS}

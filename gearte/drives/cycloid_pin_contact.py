@@ -24,7 +24,8 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from ..core.precision import require_x64
 from ..core.units import TWO_PI
 from ..core.validate import as_int
-from .cycloid_pin_geometry import UM, CycloidErrors, _placed_curve, _placement, _rot, _space_curve, checked_errors
+from .cycloid_pin_geometry import UM, CycloidErrors, _placed_curve, _placement, _rot, checked_errors
+from .cycloid_pin_solve import Contact, contacts, materialise, sincos
 
 if TYPE_CHECKING:
     from .cycloid_pin import CycloidPin
@@ -54,23 +55,30 @@ def _pins(drive: CycloidPin, err: CycloidErrors, theta_T) -> PinLayout:
     j = jnp.arange(zb, dtype=float)
     R1 = drive.pin_circle_radius + err.pin_circle_radius * UM
     psi_nom = theta_T + j * (TWO_PI / zb)
-    psi = psi_nom + err.pin_tangential * UM / R1
+    # sin/cos of ψ = ψ_nom + δ_j/R′ by angle addition: ψ_nom's are shared by a batch of reducers. What is
+    # computed per angle, per reducer or per pin is stored before it is broadcast to every pin at every angle
+    # of every reducer (`materialise`: XLA would otherwise recompute it there, per element).
+    sn, cn = materialise(sincos(psi_nom))
+    se, ce = sincos(err.pin_tangential * UM / R1)
     rad = R1 + err.pin_radial * UM
     A1 = drive.eccentricity + err.eccentricity * UM
     obx = (
         err.pin_wheel_offset * jnp.cos(err.pin_wheel_offset_phase)
         + err.pin_circle_eccentricity * jnp.cos(err.pin_circle_eccentricity_phase + theta_T)
+        - err.disc_offset * jnp.cos(err.disc_offset_phase)
     ) * UM
     oby = (
         -A1
         + (
             err.pin_wheel_offset * jnp.sin(err.pin_wheel_offset_phase)
             + err.pin_circle_eccentricity * jnp.sin(err.pin_circle_eccentricity_phase + theta_T)
+            - err.disc_offset * jnp.sin(err.disc_offset_phase)
         )
         * UM
     )
-    cx = obx - rad * jnp.sin(psi) - err.disc_offset * jnp.cos(err.disc_offset_phase) * UM
-    cy = oby + rad * jnp.cos(psi) - err.disc_offset * jnp.sin(err.disc_offset_phase) * UM
+    se, ce, rad, obx, oby = materialise((se, ce, rad, obx, oby))
+    cx = obx - rad * (sn * ce + cn * se)
+    cy = oby + rad * (cn * ce - sn * se)
     # Pin j meets the theoretical curve at parameter ψ_j − 2πj (module notes): space n, local φ. A tiny
     # offset breaks ties (a pin exactly at a valley bottom or a tooth tip) the same way in every fusion
     # XLA makes of this expression; the barrier keeps one copy of the result.
@@ -90,109 +98,17 @@ def pin_layout(drive: CycloidPin, errors: ErrorsLike, input_angle: ArrayLike) ->
     return _pins(drive, checked_errors(drive, errors), jnp.asarray(input_angle, dtype=float))
 
 
-def _wrap(x):
-    return jnp.mod(x + math.pi, TWO_PI) - math.pi
-
-
-#: Fixed iteration counts of the solves (Newton in cos t, then in t; convergence is checked and reported).
-NEWTON_STEPS = 8
-POLISH_STEPS = 4
+#: Fixed iteration count of the normal-clearance search (the contact solve's are in `gearte.drives.cycloid_pin_solve`).
 DISTANCE_STEPS = 12
-#: A pin-to-locus radius residual below this (mm) counts as converged.
-RESIDUAL_TOL_MM = 1e-9
-
-
-class _Contact(eqx.Module):
-    rotation: Float[Array, " zb"]  # θ_j − θ_theory, rad (finite; see `reachable`)
-    phi: Float[Array, " zb"]  # flank parameter of the contact point
-    reachable: Bool[Array, " zb"]  # the pin is not beyond the tooth tip
-    interference: Bool[Array, " zb"]  # the pin is deeper than the tooth-space bottom at every rotation
-    converged: Bool[Array, " zb"]
 
 
 def _stop(tree):
     return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, tree)
 
 
-def _contacts(drive: CycloidPin, err: CycloidErrors, pins: PinLayout, theta_T) -> _Contact:
-    """Rotation to contact of every pin against its own flank (module notes)."""
-    sg = jax.lax.stop_gradient
-
-    def make_h(drive, err, pins):
-        c = pins.centre
-        rho2 = c[:, 0] ** 2 + c[:, 1] ** 2
-        d = drive.wheel_pin_radius - pins.radius
-        pl = _placement(drive, err, pins.space, pins.side)
-
-        def h(t):  # |Q(side·t)|² − |c|², increasing in t ∈ [0, π]
-            x, y = _placed_curve(drive, pl, pins.side * t, d)
-            return x * x + y * y - rho2
-
-        return h
-
-    h = make_h(drive, err, pins)
-    hs = make_h(*_stop((drive, err, pins)))  # the iteration is not differentiated
-    ones = jnp.ones(pins.side.shape)
-    interference = hs(jnp.zeros_like(ones)) > 0.0
-    reachable = hs(jnp.full_like(ones, math.pi)) >= 0.0
-
-    # Newton in c = cos t: for the error-free profile |P|² = R² + a² − 2Ra cos φ is linear in c, so the
-    # iteration converges in a few steps everywhere, also at the fold t = 0 (a pin at the valley bottom).
-    def hc(c):
-        return hs(jnp.arccos(jnp.clip(c, -1.0 + 1e-15, 1.0 - 1e-15)))
-
-    def body(_, state):
-        c, lo, hi, was_clipped = state  # h(lo) ≥ 0 ≥ h(hi); h decreases in c
-        val, der = jax.jvp(hc, (c,), (ones,))
-        hi = jnp.where(val <= 0, c, hi)
-        lo = jnp.where(val > 0, c, lo)
-        cn = c - val / jnp.where(der != 0, der, 1.0)
-        inside = (cn >= lo) & (cn <= hi)
-        usable = (der < 0) & jnp.isfinite(cn)
-        # A Newton step just past the bracket (a root next to c = ±1) is pulled back just inside it, once;
-        # otherwise bisect.
-        clip_now = usable & ~inside & ~was_clipped
-        eps = 1e-6 * (hi - lo)
-        cn = jnp.where(usable & inside, cn, jnp.where(clip_now, jnp.clip(cn, lo + eps, hi - eps), 0.5 * (lo + hi)))
-        # A root stays (|c| = 1, a pin exactly at a valley bottom or tooth tip, is a fold where the clipped
-        # derivative vanishes); 1e-9 mm² is a radius residual of ~3e-12 mm.
-        done = jnp.abs(val) <= 1e-9
-        return jnp.where(done, c, cn), lo, hi, clip_now & ~done
-
-    c0 = jnp.cos(jnp.abs(pins.phi))
-    cfin, lo_c, hi_c, _ = jax.lax.fori_loop(0, NEWTON_STEPS, body, (c0, -ones, ones, jnp.zeros(ones.shape, dtype=bool)))
-    t = jnp.arccos(jnp.clip(cfin, -1.0, 1.0))
-
-    # Polish in t, bracketed: the errors make h(c) behave like √(1 ± c) next to a fold, where the
-    # iteration in c slows down; Newton in t (bisection when it leaves the bracket) finishes the job.
-    def polish(_, state):
-        t, a, b = state  # h(a) ≤ 0 ≤ h(b), a ≤ b
-        val, der = jax.jvp(hs, (t,), (ones,))
-        a = jnp.where(val <= 0, t, a)
-        b = jnp.where(val >= 0, t, b)
-        tn = t - val / jnp.where(der != 0, der, 1.0)
-        bad = ~((tn >= a) & (tn <= b)) | (der <= 0) | ~jnp.isfinite(tn)
-        tn = jnp.where(bad, 0.5 * (a + b), tn)
-        return jnp.where(jnp.abs(val) <= 1e-9, t, tn), a, b
-
-    t_a = jnp.arccos(jnp.clip(hi_c, -1.0, 1.0))
-    t_b = jnp.arccos(jnp.clip(lo_c, -1.0, 1.0))
-    t, _, _ = jax.lax.fori_loop(0, POLISH_STEPS, polish, (jnp.clip(t, t_a, t_b), t_a, t_b))
-    t = sg(jnp.where(interference, 0.0, jnp.where(reachable, t, math.pi)))
-    # One Newton step with the derivative held: the value stays, the gradient is the implicit one.
-    der = jax.jvp(hs, (t,), (ones,))[1]
-    ok = (jnp.abs(der) > 1e-12) & reachable & ~interference
-    t_imp = t - jnp.where(ok, h(t) / jnp.where(ok, der, 1.0), 0.0)
-    phi = pins.side * t_imp
-    d = drive.wheel_pin_radius - pins.radius
-    x, y = _space_curve(drive, err, pins.space, pins.side, phi, d)
-    c = pins.centre
-    rho = jnp.sqrt(c[:, 0] ** 2 + c[:, 1] ** 2)
-    resid = jnp.abs(jnp.sqrt(x * x + y * y) - rho)
-    converged = (resid < RESIDUAL_TOL_MM) | ~reachable | interference
-    theta = jnp.arctan2(c[:, 1], c[:, 0]) - jnp.arctan2(y, x)
-    rotation = _wrap(theta - theta_T * (drive.z_pins / drive.z_lobes))
-    return _Contact(rotation, phi, reachable, interference, converged)
+def _contacts(drive: CycloidPin, err: CycloidErrors, pins: PinLayout, theta_T) -> Contact:
+    """Rotation to contact of every pin against its own flank (`gearte.drives.cycloid_pin_solve`)."""
+    return contacts(drive, err, pins, theta_T)
 
 
 def _normal(drive: CycloidPin, err: CycloidErrors, pins: PinLayout, phi0, turn):

@@ -349,6 +349,12 @@ class AbstractGridDrive(AbstractDrive):
     def input_angles(self) -> Float[Array, " p"]:
         """The input angles (rad) the response is computed at."""
 
+    def te(self, response: Any) -> Float[Array, " p"]:
+        """The TE (rad) at each angle of `input_angles`, read from this drive's `response` (identification fits it
+        to measured records). A drive that states no single TE on its grid leaves this out."""
+        del response
+        raise NotImplementedError(f"{type(self).__name__} does not state its TE on its grid (AbstractGridDrive.te)")
+
 
 def sample_key(key: PRNGKeyArray, index) -> PRNGKeyArray:
     """The key of sample `index` of a study keyed by `key` (``fold_in``)."""

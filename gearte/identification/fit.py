@@ -5,6 +5,8 @@ an eccentricity as its Cartesian phasor (x, y) = e (cos φ, sin φ), µm, a sign
 each record adds its own constant (an encoder's zero is arbitrary). The residual, model TE − measured
 TE on the record's input angles, is minimised by Levenberg–Marquardt (`optimistix.least_squares`),
 differentiating through the drive's model (`AbstractSinusoidalDrive.signal`), from a few starts under `vmap`.
+A grid drive (`AbstractGridDrive`, the cycloid-pin reducer) is identified on its own grid of input angles by
+`gearte.identification.fit_grid`, with the same result (`identify(..., adjust=, start=)`).
 
 **Identifiability.** One record shows each line of the TE once: sources that act at the same
 frequency (and in the same way) add up to one phasor, and no record of this assembly can tell
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from fractions import Fraction
+from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
@@ -39,10 +42,13 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..core.precision import require_x64
 from ..core.solution import RESULTS, check
 from ..core.units import TWO_PI
-from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
+from ..drives.protocol import AbstractGridDrive, AbstractSinusoidalDrive, Eccentricity, Errors
 from ..studies.montecarlo import as_key
 from .identifiability import Group, Instance, groups, period, select
 from .records import MeasuredRecord, RecordError
+
+if TYPE_CHECKING:
+    from .fit_grid import GridIdentificationProblem
 
 Z95 = 1.959963984540054  # two-sided 95 % point of the normal law
 
@@ -128,31 +134,14 @@ class IdentificationProblem(eqx.Module):
         n, p = sum(len(t) for t in te), jac.shape[1]
         sigma2 = cost[best] / max(n - p, 1)
         cov = sigma2 * jnp.linalg.inv(jac.T @ jac)
-        mags, phases, mse, pse, j = [], [], [], [], 0
-        for w in widths:
-            if w == 2:
-                x_, y_ = y[j], y[j + 1]
-                m = jnp.hypot(x_, y_)
-                g_m = jnp.stack([x_ / m, y_ / m])
-                g_p = jnp.stack([-y_ / m**2, x_ / m**2])
-                c = cov[j : j + 2, j : j + 2]
-                mags.append(m)
-                phases.append(jnp.mod(jnp.arctan2(y_, x_), TWO_PI))
-                mse.append(jnp.sqrt(g_m @ c @ g_m))
-                pse.append(jnp.sqrt(g_p @ c @ g_p))
-            else:
-                mags.append(y[j])
-                phases.append(jnp.asarray(jnp.nan))
-                mse.append(jnp.sqrt(cov[j, j]))
-                pse.append(jnp.asarray(jnp.nan))
-            j += w
+        mags, phases, mse, pse = estimates(y, cov, widths)
         period = jnp.asarray([self.phase_period[i] for i in self.kept])
         full = self._full(y[:k])
         return Identification(
-            magnitude=jnp.stack(mags),
-            phase=jnp.mod(jnp.stack(phases), period),
-            magnitude_se=jnp.stack(mse),
-            phase_se=jnp.stack(pse),
+            magnitude=mags,
+            phase=jnp.mod(phases, period),
+            magnitude_se=mse,
+            phase_se=pse,
             phase_period=period,
             offset=y[k:] * 1e-6,
             residual_rms=jnp.sqrt(cost[best] / n) * 1e-6,
@@ -204,10 +193,42 @@ class Identification(eqx.Module):
         }
 
 
+def estimates(y: Array, cov: Array, widths: Sequence[int]) -> tuple[Array, Array, Array, Array]:
+    """Magnitudes, phases (rad) and their standard errors (delta method) of the parameters `y` (Cartesian phasors
+    for width 2, signed values for width 1) with covariance `cov`; a deviation's phase and its error are NaN."""
+    mags, phases, mse, pse, j = [], [], [], [], 0
+    for w in widths:
+        if w == 2:
+            x_, y_ = y[j], y[j + 1]
+            m = jnp.hypot(x_, y_)
+            g_m = jnp.stack([x_ / m, y_ / m])
+            g_p = jnp.stack([-y_ / m**2, x_ / m**2])
+            c = cov[j : j + 2, j : j + 2]
+            mags.append(m)
+            phases.append(jnp.mod(jnp.arctan2(y_, x_), TWO_PI))
+            mse.append(jnp.sqrt(g_m @ c @ g_m))
+            pse.append(jnp.sqrt(g_p @ c @ g_p))
+        else:
+            mags.append(y[j])
+            phases.append(jnp.asarray(jnp.nan))
+            mse.append(jnp.sqrt(cov[j, j]))
+            pse.append(jnp.asarray(jnp.nan))
+        j += w
+    return jnp.stack(mags), jnp.stack(phases), jnp.stack(mse), jnp.stack(pse)
+
+
 def errors_from(drive, instances: Sequence[Instance], p_full: Array, turns: Mapping[str, float]) -> dict:
     """The drive's errors from a full parameter vector (see `IdentificationProblem`)."""
-    out, j = {}, 0
-    for name, spec in drive.error_sources.items():
+    del instances  # every source of the drive, in its order
+    return unpack(drive.error_sources, drive.error_sources, p_full, turns)
+
+
+def unpack(specs: Mapping, names: Sequence[str], p_full: Array, turns: Mapping[str, float], start: Mapping | None = None) -> dict:
+    """`start` (default: none) with the sources `names` taken from `p_full` in that order: an eccentricity from its
+    Cartesian phasors (x, y) per instance, its phase turned by ``turns[name]``; a deviation from its values."""
+    out, j = dict(start or {}), 0
+    for name in names:
+        spec = specs[name]
         if spec.kind == "eccentricity":
             xs = p_full[j : j + 2 * spec.count : 2]
             ys = p_full[j + 1 : j + 2 * spec.count : 2]
@@ -244,23 +265,23 @@ def _basis(theta: np.ndarray, orders, f0: float) -> np.ndarray:
 
 
 def identification_problem(
-    drive: AbstractSinusoidalDrive,
+    drive: AbstractSinusoidalDrive | AbstractGridDrive,
     records: MeasuredRecord | Sequence[MeasuredRecord],
     *,
     turns: Sequence[Mapping[str, float]] | None = None,
     starts: int = 4,
     max_steps: int = 100,
-) -> IdentificationProblem:
-    """Check the records against the drive and find what they can identify (see the module notes).
+    adjust: Sequence[str] | None = None,
+    start: Errors | None = None,
+) -> IdentificationProblem | GridIdentificationProblem:
+    """Check the records against the drive and find what they can identify (see the module notes; for a grid
+    drive, `gearte.identification.fit_grid`, with `adjust` and `start` as in `identify`).
 
     Raises `RecordError` when a record is too short to separate the lines it needs or samples too slowly.
     """
     require_x64()
-    if not isinstance(drive, AbstractSinusoidalDrive):
-        raise ValueError(
-            f"identify: {type(drive).__name__} computes its TE on a grid; identification needs a drive whose TE is a sum of "
-            "sinusoids (planetary_2kh, harmonic, explicit)"
-        )
+    if not isinstance(drive, (AbstractSinusoidalDrive, AbstractGridDrive)):
+        raise ValueError(f"identify: {type(drive).__name__} is neither a sinusoidal nor a grid drive of the drive protocol")
     recs = [records] if isinstance(records, MeasuredRecord) else list(records)
     if not recs:
         raise ValueError("identify: give at least one record")
@@ -272,6 +293,12 @@ def identification_problem(
         for name in t:
             if name not in specs or specs[name].kind != "eccentricity":
                 raise ValueError(f"turns: {name!r} is not an eccentricity source of this drive; use one of {sorted(specs)}")
+    if isinstance(drive, AbstractGridDrive):
+        from .fit_grid import grid_problem
+
+        return grid_problem(drive, recs, turn_list, adjust=adjust, start=start, starts=starts, max_steps=max_steps)
+    if adjust is not None or start is not None:
+        raise ValueError("adjust, start: only for a grid drive; a sinusoidal drive's identification fits every source from random phases")
     instances = _instances(drive)
     width = [2 if x.kind == "eccentricity" else 1 for x in instances]
     starts_of = np.cumsum([0] + width)
@@ -347,30 +374,36 @@ def _check_records(recs: Sequence[MeasuredRecord], freqs: list[Fraction]) -> Non
 
 
 def identify(
-    drive: AbstractSinusoidalDrive,
+    drive: AbstractSinusoidalDrive | AbstractGridDrive,
     records: MeasuredRecord | Sequence[MeasuredRecord],
     *,
     turns: Sequence[Mapping[str, float]] | None = None,
     key: int | PRNGKeyArray = 0,
     starts: int = 4,
     max_steps: int = 100,
+    adjust: Sequence[str] | None = None,
+    start: Errors | None = None,
     throw: bool = True,
 ) -> Identification:
     """Identify the errors of `drive` from measured TE records (see the module notes).
 
     **Arguments:**
 
-    - `drive`: a sinusoidal drive (`gearte.Planetary2KH`, `gearte.HarmonicDrive`, `gearte.ExplicitDrive`).
+    - `drive`: a sinusoidal drive (`gearte.Planetary2KH`, `gearte.HarmonicDrive`, `gearte.ExplicitDrive`), or a grid
+      drive (`gearte.CycloidPin`; see `gearte.identification.fit_grid`).
     - `records`: one `MeasuredRecord`, or several of the same drive re-assembled.
     - `turns`: with several records, for each a dict source → turn (rad) of that source at its assembly
       relative to the first (e.g. ``[{}, {"sun_assembly": pi/2}]``).
     - `key`: seed or key of the random starting phases.
     - `starts`: Levenberg–Marquardt starts, run together under `vmap`; the best is kept.
+    - `adjust`: a grid drive's sources to identify (default: all); the others are held at `start`.
+    - `start`: a grid drive's errors where the solve begins and the identifiability is read (source → value;
+      sources left out are 0).
     - `throw`: raise if the best start did not converge (else check `result`).
 
     **Returns:** an `Identification`.
     """
-    problem = identification_problem(drive, records, turns=turns, starts=starts, max_steps=max_steps)
+    problem = identification_problem(drive, records, turns=turns, starts=starts, max_steps=max_steps, adjust=adjust, start=start)
     recs = [records] if isinstance(records, MeasuredRecord) else list(records)
     sol = _solve(problem, [jnp.asarray(r.te) for r in recs], as_key(key))
     check(sol.result, throw=throw, what="identify")
@@ -378,5 +411,5 @@ def identify(
 
 
 @eqx.filter_jit
-def _solve(problem: IdentificationProblem, te, key):
+def _solve(problem: IdentificationProblem | GridIdentificationProblem, te, key):
     return problem.solve(te, key)

@@ -83,8 +83,9 @@ def period(coefs, tv, instances, i: int, probe: np.ndarray, starts_of) -> float:
     return TWO_PI
 
 
-def groups(instances, freqs, jac, offs, starts_of, kept, status, n_records) -> list[Group]:
-    """Connected groups of aliased instances with the identified instances they alias, unseen and constant ones."""
+def groups(instances, freqs, jac, offs, starts_of, kept, status, n_records, *, grid: bool = False) -> list[Group]:
+    """Connected groups of aliased instances with the identified instances they alias, unseen and constant ones
+    (`grid`: the Jacobian is a grid drive's, on the records' input angles at the start point)."""
     kept_cols = np.concatenate([offs] + [jac[:, starts_of[i] : starts_of[i + 1]] for i in kept], axis=1)
     owner = [-1] * n_records + [i for i in kept for _ in range(starts_of[i + 1] - starts_of[i])]
     link: dict[int, set[int]] = {i: {i} for i in kept}
@@ -114,20 +115,26 @@ def groups(instances, freqs, jac, offs, starts_of, kept, status, n_records) -> l
         labels = tuple(instances[i].label for i in order)
         others = [lab for lab in labels if lab != instances[rep].label]
         fr = freqs[rep]
-        out.append(
-            Group(
-                "combined",
-                labels,
-                instances[rep].label,
-                fr,
-                f"{', '.join(labels)} act on the same line{'s' if len(fr) > 1 else ''} ({', '.join(map(str, fr))} × input speed): one record gives their combined phasor, reported as "
-                f"{instances[rep].label}. To separate them, turn one of {', '.join(others)} by a known angle at re-assembly and "
-                f"record again; {len(labels)} records with independent turns separate all {len(labels)} (identify(..., turns=[…]))",
-            )
+        advice = (
+            f"{', '.join(labels)} change the TE on the records' input angles only together (their Jacobian columns are "
+            f"linearly dependent there): the records give one combination, carried by {instances[rep].label} with "
+            f"{', '.join(others)} held at their start values. Separating them needs records over other input angles or "
+            "another measurement"
+            if grid
+            else f"{', '.join(labels)} act on the same line{'s' if len(fr) > 1 else ''} ({', '.join(map(str, fr))} × input speed): one record gives their combined phasor, reported as "
+            f"{instances[rep].label}. To separate them, turn one of {', '.join(others)} by a known angle at re-assembly and "
+            f"record again; {len(labels)} records with independent turns separate all {len(labels)} (identify(..., turns=[…]))"
         )
+        out.append(Group("combined", labels, instances[rep].label, fr, advice))
     if unseen:
         labs = tuple(instances[i].label for i in unseen)
-        out.append(Group("unseen", labs, None, (), f"{', '.join(labs)} do not reach the TE in this drive's model: no record shows them"))
+        why = (
+            "do not reach the TE on the records' input angles at the start point (a source acting through another's size, "
+            "such as the phase of an error whose size is 0 there, is unseen at that point: start from non-zero values)"
+            if grid
+            else "do not reach the TE in this drive's model: no record shows them"
+        )
+        out.append(Group("unseen", labs, None, (), f"{', '.join(labs)} {why}"))
     if constant:
         labs = tuple(instances[i].label for i in constant)
         out.append(

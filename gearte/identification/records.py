@@ -37,7 +37,7 @@ from jaxtyping import PRNGKeyArray
 from ..core.records import Record
 from ..core.signal import evaluate
 from ..core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD, TWO_PI
-from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity, Errors
+from ..drives.protocol import AbstractGridDrive, AbstractSinusoidalDrive, Eccentricity, Errors
 from ..studies.montecarlo import as_key
 
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0, "rev": TWO_PI}
@@ -321,12 +321,12 @@ def write_record(path: str | Path, rec: MeasuredRecord, *, unit: str = "arcsec",
 
 
 def synthetic_record(
-    drive: AbstractSinusoidalDrive,
+    drive: AbstractSinusoidalDrive | AbstractGridDrive,
     errors: Errors,
     *,
     key: int | PRNGKeyArray,
-    revolutions: float,
-    points_per_rev: int,
+    revolutions: float | None = None,
+    points_per_rev: int | None = None,
     noise: float = 0.0,
     counts_per_rev: int | None = None,
     input_rpm: float | None = None,
@@ -339,9 +339,26 @@ def synthetic_record(
     encoder adds Gaussian noise of standard deviation `noise` (rad) and rounds the output angle to
     its `counts_per_rev` counts (None: no rounding). `turns` turns sources at assembly (source →
     rad added to its phase), as `identify` takes them. `key` (a seed or a JAX key) makes it reproducible.
+
+    A grid drive's record lies on the angles of its `trace` (for `gearte.CycloidPin`: `analysis.sweep_points_per_pitch`
+    per pin pitch over `analysis.sweep_revolutions`), the TE exact there; leave `revolutions` and `points_per_rev` out.
     """
+    if isinstance(drive, AbstractGridDrive):
+        if revolutions is not None or points_per_rev is not None:
+            raise ValueError(
+                "synthetic_record: a grid drive's record lies on the angles of its trace (set them in the drive's analysis); "
+                "leave revolutions and points_per_rev out"
+            )
+        errs = turned(drive, {**drive.zero_errors(), **dict(errors)}, turns) if turns else errors
+        tr = drive.trace(errs)
+        theta = np.asarray(tr.theta, dtype=np.float64)
+        ratio = float(getattr(drive, "ratio", 1.0))
+        te = encoder_noise(theta, tr.te, key=key, ratio=ratio, noise=noise, counts_per_rev=counts_per_rev)
+        return resample(MeasuredRecord(theta=theta, te=te, input_rpm=input_rpm, source="synthetic record"))
     if not isinstance(drive, AbstractSinusoidalDrive):
-        raise ValueError("synthetic_record: needs a drive whose TE is a sum of sinusoids (planetary_2kh, harmonic, explicit)")
+        raise ValueError("synthetic_record: needs a sinusoidal drive (planetary_2kh, harmonic, explicit) or a grid drive (cycloid_pin)")
+    if revolutions is None or points_per_rev is None:
+        raise ValueError("synthetic_record: give revolutions and points_per_rev for a sinusoidal drive's record")
     n = int(round(float(revolutions) * int(points_per_rev)))
     if n < 16:
         raise ValueError(f"synthetic_record: {revolutions} revolutions at {points_per_rev} points per revolution is under 16 samples")

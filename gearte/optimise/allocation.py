@@ -51,6 +51,16 @@ def starts_result(results, best) -> tuple[int, Any]:
     return int(ok.sum()), RESULTS.successful if ok.all() else RESULTS.some_starts_failed
 
 
+def best_start(values, results, *, rtol: float = 1e-9) -> int:
+    """The start with the lowest exact value; among starts that tie it (within `rtol` relative: the same
+    optimum, reached to rounding), one whose solve converged, so a tie is not reported as a failure."""
+    v = np.asarray(values, dtype=np.float64)
+    ok = np.asarray(results == optx.RESULTS.successful)
+    tied = v <= v.min() + rtol * max(abs(float(v.min())), 1e-300)
+    pool = np.nonzero(tied & ok)[0]
+    return int(pool[np.argmin(v[pool])]) if pool.size else int(np.argmin(v))
+
+
 def partial_success(result) -> bool:
     """Whether the best start succeeded but some others did not (reported, not raised)."""
     return bool(result == RESULTS.some_starts_failed)
@@ -376,7 +386,7 @@ def allocate_rule(
         scores = jnp.stack([worst_case(p, y) for y in sol.value])
     else:
         scores = jax.vmap(lambda y: surrogate(y, None))(sol.value)
-    best = jnp.argmin(scores)
+    best = best_start(scores, sol.result)
     y_best = jnp.mod(sol.value[best], _TWO_PI)
     figures = evaluate_rule(p, y_best, key=k_check, n_check=n_check)
     converged, result = starts_result(sol.result, best)

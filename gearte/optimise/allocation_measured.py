@@ -22,7 +22,7 @@ from ..core.solution import RESULTS, check
 from ..core.units import TWO_PI as _TWO_PI
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
 from ..studies.montecarlo import as_key
-from .allocation import check_extremum_metric, check_phase_drive, partial_success, starts_result
+from .allocation import best_start, check_extremum_metric, check_phase_drive, partial_success, starts_result
 
 
 class MeasuredAllocation(eqx.Module):
@@ -124,7 +124,7 @@ def allocate_measured(
     solver = optx.BFGS(rtol=1e-8, atol=1e-8)
     sol = jax.vmap(lambda s: optx.minimise(surrogate, solver, s, None, max_steps=max_steps, throw=False))(y0)
     values = jax.vmap(exact)(sol.value)
-    best = jnp.argmin(values)
+    best = best_start(values, sol.result)
     y_best, te_best = sol.value[best], values[best]
 
     steps = [adjust[n] for n in names for _ in range(counts_all[n])]

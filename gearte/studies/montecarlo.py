@@ -27,7 +27,7 @@ from tqdm import tqdm
 
 from ..core.metrics import AbstractMetric
 from ..core.precision import require_x64
-from ..drives.protocol import AbstractDrive
+from ..drives.protocol import AbstractDrive, AbstractSinusoidalDrive
 from .errors import ErrorModel
 
 PERCENTILES = (1.0, 5.0, 50.0, 95.0, 99.0, 99.73)
@@ -94,6 +94,20 @@ class TEStudy(eqx.Module):
             return jnp.stack([m(self.drive, r) for m in self.metric])
         return self.metric(self.drive, r)
 
+    def batch(self, keys: PRNGKeyArray) -> Float[Array, ...]:
+        """The values of the samples drawn with `keys` (leading axis), equal to ``jax.vmap(self)(keys)``.
+
+        A sinusoidal drive's responses are drawn under `vmap` and its metrics (which take any
+        batch shape) run on the whole batch at once: the exact extrema search then works on dense
+        arrays rather than through `vmap`'s batching of gathers and loops.
+        """
+        if not isinstance(self.drive, AbstractSinusoidalDrive):
+            return jax.vmap(self)(keys)
+        r = jax.vmap(self.response)(keys)
+        if isinstance(self.metric, tuple):
+            return jnp.stack([m(self.drive, r) for m in self.metric], axis=-1)
+        return self.metric(self.drive, r)
+
     def bytes_per_sample(self) -> int:
         """Rough peak working memory per sample (bytes), to size blocks."""
         return self.drive.bytes_per_sample()
@@ -105,27 +119,60 @@ def sample_keys(key: PRNGKeyArray, start, size: int) -> PRNGKeyArray:
     return jax.vmap(lambda i: jax.random.fold_in(key, i))(idx)
 
 
+def _block(fn, key, start, block: int):
+    """Samples ``start … start + block − 1``, vectorised: the one program every device runs."""
+    keys = sample_keys(key, start, block)
+    batch = getattr(fn, "batch", None)
+    return batch(keys) if callable(batch) else jax.vmap(fn)(keys)
+
+
+def sample_mesh() -> jax.sharding.Mesh:
+    """A one-axis mesh (``"samples"``) of every device of every process (`jax.devices()`)."""
+    return jax.sharding.Mesh(np.asarray(jax.devices()), ("samples",))
+
+
 @eqx.filter_jit
-def _run_block(fn, key, start, block: int):
-    """Samples ``start … start + block − 1``, vectorised: the one compiled program of a study."""
-    idx = start + jnp.arange(block, dtype=jnp.uint32)
-    return jax.vmap(fn)(jax.vmap(lambda i: jax.random.fold_in(key, i))(idx))
+def _run_step(fn, key, starts, block: int, mesh: jax.sharding.Mesh):
+    """One block per device: device d computes the block starting at ``starts[d]`` with the same program,
+    whatever the number of devices (`shard_map`), so results do not depend on the device count."""
+    spec = jax.sharding.PartitionSpec("samples")
+
+    def per_device(start):
+        return jax.tree.map(lambda x: x[None], _block(fn, key, start[0], block))
+
+    # check_vma=False: drives loop with carries built from constants (no per-device type annotations needed).
+    return jax.shard_map(per_device, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)(starts)
 
 
 def default_block_size(bytes_per_sample: int, *, budget_bytes: int = 128 * 2**20) -> int:
-    """Largest power of two ≤ 1024 whose block of samples fits in `budget_bytes`."""
-    c = max(1, min(1024, budget_bytes // max(1, bytes_per_sample)))
+    """Largest power of two ≤ 4096 whose block of samples fits in `budget_bytes` (larger blocks spread the
+    per-call cost of a compiled program over more samples)."""
+    c = max(1, min(4096, budget_bytes // max(1, bytes_per_sample)))
     return 1 << int(math.floor(math.log2(c)))
 
 
 class MonteCarloResult(eqx.Module):
-    """Per-sample values (rad for angles) of a Monte Carlo study, with how they were drawn."""
+    """Per-sample values (rad for angles) of a Monte Carlo study, with how they were drawn.
+
+    `values` is None when the run was asked not to keep them (``keep=False``: the values went to
+    `on_chunk` only). `devices` is the number of devices (of every process) that computed them.
+    """
 
     values: Any
     n_samples: int = eqx.field(static=True)
     chunk_size: int = eqx.field(static=True)
     block_size: int = eqx.field(static=True)
     seconds: float = eqx.field(static=True)
+    devices: int = eqx.field(static=True, default=1)
+
+
+def _to_host(out) -> Any:
+    """A step's result (leading axes: device, sample) as NumPy arrays on every process, samples in order."""
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        out = multihost_utils.process_allgather(out, tiled=True)
+    return jax.tree.map(lambda x: np.asarray(x).reshape((-1,) + np.shape(x)[2:]), out)
 
 
 def monte_carlo(
@@ -137,8 +184,11 @@ def monte_carlo(
     block_size: int | None = None,
     progress: bool | None = None,
     desc: str = "Monte Carlo",
+    keep: bool = True,
+    on_chunk: Callable[[int, Any], None] | None = None,
+    mesh: jax.sharding.Mesh | None = None,
 ) -> MonteCarloResult:
-    """Run ``fn(key_i)`` for ``n_samples`` samples.
+    """Run ``fn(key_i)`` for ``n_samples`` samples, sharded over every device.
 
     **Arguments:**
 
@@ -146,18 +196,27 @@ def monte_carlo(
       runs reuse the compiled code).
     - `key`: integer seed or `jax.random` key; sample i uses ``fold_in(key, i)``.
     - `n_samples`: number of samples (default 50,000).
-    - `chunk_size`: samples between progress-bar updates (rounded up to whole blocks;
-      default 16 blocks). Never changes the results, nor what is compiled.
+    - `chunk_size`: samples between progress-bar updates and `on_chunk` calls (rounded up to
+      whole steps of one block per device; default 16 blocks). Never changes the results,
+      nor what is compiled.
     - `block_size`: samples computed together in one vectorised block, the one compiled
       program of the study (compiled once, whatever `n_samples`); bounds memory.
       Default: from ``fn.bytes_per_sample()`` (128 MiB per block), else 256. Results are
-      bit-identical for any chunk size and any number of samples at a given block size
-      (the first n samples of a longer run are those of an n-sample run); another block
-      size may change them in the last bit.
+      bit-identical for any chunk size, any number of devices or processes and any number
+      of samples at a given block size (the first n samples of a longer run are those of an
+      n-sample run); another block size may change them in the last bit.
     - `progress`: show a progress bar on stderr (default: when stderr is a terminal).
+    - `keep`: hold every value and return them (default). With ``keep=False`` only
+      `on_chunk` sees them, a chunk at a time: memory stays bounded whatever `n_samples`.
+    - `on_chunk`: called as ``on_chunk(start, values)`` with the values of samples
+      ``start, start + 1, …`` (NumPy; a pytree when `fn` returns one), chunk after chunk in
+      sample order, on every process.
+    - `mesh`: the devices to shard samples over (a one-axis `jax.sharding.Mesh`); default
+      every device of every process (`sample_mesh`). Device d of a step computes block
+      ``step · devices + d`` with the program a single device would run.
 
     **Returns:** a `MonteCarloResult` with the values as a NumPy array (a pytree of them when `fn`
-    returns a pytree).
+    returns a pytree), or None with ``keep=False``.
     """
     require_x64()
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
@@ -168,32 +227,71 @@ def monte_carlo(
     for name, v in (("chunk_size", chunk_size), ("block_size", block_size)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1):
             raise ValueError(f"{name}: must be a whole number ≥ 1, got {v!r}")
+    if not keep and on_chunk is None:
+        raise ValueError("keep=False: give on_chunk, or the values would be lost")
     if block_size is None:
         sizer = getattr(fn, "bytes_per_sample", None)
         per = int(sizer()) if callable(sizer) else 0  # pyright: ignore[reportArgumentType]
         block_size = default_block_size(per) if per else 256
     block = int(block_size)
-    # Every block is the same compiled program (one compilation per study and block size, whatever
-    # the number of samples or the chunk size), so the chunk only sets how often progress is shown.
+    mesh = sample_mesh() if mesh is None else mesh
+    if mesh.axis_names != ("samples",):
+        raise ValueError(f"mesh: expected one axis named 'samples', got {mesh.axis_names}")
+    n_dev = mesh.size
+    sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("samples"))
+    # Every block is the same compiled program (one compilation per study, block size and mesh,
+    # whatever the number of samples or the chunk size); a step runs one block on each device, and
+    # the chunk only sets how often progress is shown and values are handed on.
     n_blocks = -(-n_samples // block)
-    blocks_per_chunk = max(1, -(-int(chunk_size) // block)) if chunk_size is not None else 16
-    blocks_per_chunk = min(blocks_per_chunk, n_blocks)
-    chunk = blocks_per_chunk * block
+    n_steps = -(-n_blocks // n_dev)
+    steps_per_chunk = max(1, -(-int(chunk_size) // (block * n_dev))) if chunk_size is not None else max(1, 16 // n_dev)
+    steps_per_chunk = min(steps_per_chunk, n_steps)
+    chunk = steps_per_chunk * block * n_dev
     if progress is None:
-        progress = n_blocks > blocks_per_chunk and sys.stderr.isatty()
+        progress = n_steps > steps_per_chunk and sys.stderr.isatty()
     t0 = time.perf_counter()
-    parts = []
+    parts: list = []
+    pending: list = []  # dispatched steps not yet handed on: (first sample, device result)
+
+    def launch(step: int):
+        starts = (np.arange(n_dev, dtype=np.uint32) + np.uint32(step * n_dev)) * np.uint32(block)
+        arr = jax.make_array_from_callback((n_dev,), sharding, lambda idx: starts[idx])
+        return _run_step(fn, key, arr, block, mesh)
+
+    def hand_on(first: int, out) -> int:
+        vals = _to_host(out)
+        n = min(n_samples - first, block * n_dev)  # samples past n_samples in the last step are dropped
+        vals = jax.tree.map(lambda x: x[:n], vals)
+        if keep:
+            parts.append(vals)
+        if on_chunk is not None:
+            on_chunk(first, vals)
+        return first + n
+
+    done = 0
     with tqdm(total=n_samples, desc=desc, unit="samples", disable=not progress, leave=False) as bar:
-        for b in range(n_blocks):
-            start = b * block
-            # Samples past n_samples in the last block are dropped.
-            parts.append(_run_block(fn, key, jnp.asarray(start, dtype=jnp.uint32), block))
-            if progress and ((b + 1) % blocks_per_chunk == 0 or b + 1 == n_blocks):
-                jax.block_until_ready(parts[-1])
-                bar.update(min(start + block, n_samples) - bar.n)
-    # One array, or a pytree of them when `fn` returns several outputs per sample.
-    values = jax.tree.map(lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:n_samples], *parts)
-    return MonteCarloResult(values=values, n_samples=int(n_samples), chunk_size=chunk, block_size=block, seconds=time.perf_counter() - t0)
+        for step in range(n_steps):
+            pending.append((step * block * n_dev, launch(step)))
+            # Hand results on a chunk at a time, one step behind the dispatch so the devices keep busy;
+            # without `on_chunk`, results stay on the devices until the end (as few host copies as possible).
+            if (step + 1) % steps_per_chunk == 0 or step + 1 == n_steps:
+                flush = pending if step + 1 == n_steps or on_chunk is None else pending[:-1]
+                if on_chunk is not None or progress:
+                    for first, out in flush:
+                        done = hand_on(first, out)
+                    pending = pending[len(flush) :]
+                if progress:
+                    bar.update(done - bar.n)
+        for first, out in pending:
+            done = hand_on(first, out)
+        bar.update(done - bar.n)
+    values = None
+    if keep:
+        # One array, or a pytree of them when `fn` returns several outputs per sample.
+        values = jax.tree.map(lambda *xs: np.concatenate(xs), *parts) if len(parts) > 1 else parts[0]
+    return MonteCarloResult(
+        values=values, n_samples=int(n_samples), chunk_size=chunk, block_size=block, seconds=time.perf_counter() - t0, devices=n_dev
+    )
 
 
 class Statistics(eqx.Module):

@@ -45,7 +45,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
-from scipy import stats
 
 from ..core.metrics import AbstractMetric
 from ..core.precision import require_x64
@@ -338,6 +337,8 @@ def sobol_indices(
             "or set by a rule, so the TE does not vary"
         )
     groups = [s for s in model.specs if s in owners]
+    from scipy import stats  # scipy.stats takes a second to import: only when Sobol' indices are asked for
+
     A, B = _sobol_design(stats, n, d, _numpy_rng(key))
     pages = []
     for j in range(d):

@@ -1,0 +1,151 @@
+"""Time-varying mesh stiffness of helical meshes by slices across the face width.
+
+The face width b is cut into K slices of width Δz = b/K. In slice k (centre z_k from mid face) the
+tooth pairs j of a mesh sit on the transverse path of contact at
+
+    u_kj(τ) = u_P + p_bt (τ + φ_m) + z_k tan β_b − j p_bt,     τ in mesh periods,
+
+(u from the start of the path, u_P the pitch point, φ_m the mesh's phase, `helical_geometry.mesh_phases`):
+a helical contact line is a straight line inclined at β_b on the plane of action, so across the
+face it sweeps the path of contact. A pair carries load where 0 ≤ u ≤ g_α. Over the slice, u spans
+[u_kj − w/2, u_kj + w/2] with w = Δz tan β_b, and the pair's weight is the fraction of that span on
+the path (the exact integral of the contact-line length over the slice: continuous and piecewise
+linear in time, so the right-hand side has no jumps). Each pair in each slice is a spring of
+stiffness c_γ b / (ε_α K) × weight, so the mean mesh stiffness is c_γ b (ISO 6336-1's mean mesh
+stiffness per unit face width, c_γα), and the stiffness varies as the total contact-line length
+does: rectangular single/double alternation for spur gears (w → 0), smoothed by the overlap ε_β of
+helical gears, and constant when ε_β is whole. A slice model rather than a Fourier series of the
+alternation: it handles the overlap ratio by construction, and the same slices carry the crowning
+(a load distribution across the face) and the profile relief of each pair.
+
+`mean` mode keeps one pair per slice at the pitch point with weight ε_α (constant stiffness c_γ b).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from .helical_geometry import Geometry, HelicalStage, lead_mismatch_gap, mesh_phases
+from .helical_modifications import StageModifications, crowning, flank_pair_relief
+
+STIFFNESS_MODELS = ("slices", "mean")
+
+
+def slice_centres(face_width, n_slices: int) -> Float[Array, " k"]:
+    """Centres of `n_slices` equal slices of the face, mm from mid face."""
+    k = jnp.arange(n_slices, dtype=float)
+    return (k + 0.5) / n_slices * face_width - face_width / 2
+
+
+def contact_fraction(u, half_span, path_length):
+    """Fraction of [u − half_span, u + half_span] that lies on [0, path_length]."""
+    lo = jnp.maximum(u - half_span, 0.0)
+    hi = jnp.minimum(u + half_span, path_length)
+    return jnp.clip(hi - lo, 0.0, 2 * half_span) / (2 * half_span)
+
+
+def pair_range(geom: Geometry, face_width: float, n_slices: int) -> tuple[int, int]:
+    """Tooth-pair indices j (lo, hi) that cover the path of contact and the slice spans (concrete geometry)."""
+    pbt = float(geom.base_pitch)
+    w = float(face_width) / n_slices * math.tan(float(geom.base_helix_angle))
+    g = float(jnp.max(geom.path_length))
+    lo = -math.ceil(w / (2 * pbt)) - 1
+    hi = math.ceil((g + w / 2) / pbt) + 2
+    return lo, hi
+
+
+class SlicedMeshes(eqx.Module):
+    """Gap excitation and contact weights of every tooth pair in every slice of every mesh.
+
+    Meshes are ordered sun–planet 1 … N, then planet–ring 1 … N. Calling it at τ (mesh periods)
+    returns ``(gap, weight)``, each of shape (2N·K, J): `gap` (µm) is the excitation added to the
+    members' approach along the contact normal (LOA errors plus the lead mismatch minus the
+    modification), `weight` the
+    pair's contact weight (0 … 1).
+    """
+
+    path_length: Float[Array, " m"]
+    pitch_point: Float[Array, " m"]
+    phase: Float[Array, " m"]
+    base_pitch: Float[Array, ""]
+    lead_shift: Float[Array, " k"]
+    half_span: Float[Array, ""]
+    contact_ratio: Float[Array, " m"]
+    crowning: Float[Array, "m k"]
+    mismatch: Float[Array, "m k"]
+    modifications: StageModifications
+    errors: Callable[[Array], Array] | None
+    n_planets: int = eqx.field(static=True)
+    n_slices: int = eqx.field(static=True)
+    pairs: tuple[int, int] = eqx.field(static=True)
+    model: str = eqx.field(static=True)
+
+    def __init__(
+        self,
+        stage: HelicalStage,
+        geom: Geometry,
+        modifications: StageModifications,
+        errors,
+        *,
+        n_slices: int,
+        pairs: tuple[int, int],
+        model: str = "slices",
+    ):
+        if model not in STIFFNESS_MODELS:
+            raise ValueError(f"mesh stiffness model: one of {STIFFNESS_MODELS}, got {model!r}")
+        n = stage.n_planets
+        ones = jnp.ones(n)
+        ext_phase, int_phase = mesh_phases(stage)
+        z = slice_centres(stage.face_width, n_slices)
+        self.path_length = jnp.concatenate([geom.path_length[0] * ones, geom.path_length[1] * ones])
+        self.pitch_point = jnp.concatenate([geom.pitch_point[0] * ones, geom.pitch_point[1] * ones])
+        self.phase = jnp.concatenate([ext_phase, int_phase])
+        self.contact_ratio = jnp.concatenate([geom.contact_ratio[0] * ones, geom.contact_ratio[1] * ones])
+        self.base_pitch = geom.base_pitch
+        self.lead_shift = z * jnp.tan(geom.base_helix_angle)
+        self.half_span = jnp.maximum(stage.face_width / n_slices * jnp.tan(geom.base_helix_angle), 1e-3 * geom.base_pitch) / 2
+        m = modifications
+        c_ext = crowning(m.sun, m.planet_sun_flank, z, stage.face_width)
+        c_int = crowning(m.planet_ring_flank, m.ring, z, stage.face_width)
+        self.crowning = jnp.concatenate([jnp.broadcast_to(c_ext, (n, n_slices)), jnp.broadcast_to(c_int, (n, n_slices))])
+        mismatch = lead_mismatch_gap(stage.lead_mismatch[:, None], z[None, :], stage.face_width)  # (2, K)
+        self.mismatch = jnp.concatenate([jnp.broadcast_to(mismatch[0], (n, n_slices)), jnp.broadcast_to(mismatch[1], (n, n_slices))])
+        self.modifications = modifications
+        self.errors = errors
+        self.n_planets, self.n_slices, self.pairs, self.model = n, n_slices, pairs, model
+
+    def positions(self, tau) -> tuple[Float[Array, "m k j"], Float[Array, "m k j"]]:
+        """Position u (mm) on the path of contact and contact weight of every pair, at τ (mesh periods)."""
+        j = jnp.arange(self.pairs[0], self.pairs[1], dtype=float)
+        pbt = self.base_pitch
+        if self.model == "mean":
+            u = jnp.broadcast_to(self.pitch_point[:, None, None], (self.phase.shape[0], self.n_slices, 1))
+            return u, jnp.broadcast_to(self.contact_ratio[:, None, None], u.shape)
+        lead = self.pitch_point[:, None] + pbt * (tau + self.phase[:, None]) + self.lead_shift[None, :]
+        base = jnp.mod(lead, pbt)
+        u = base[..., None] - j * pbt
+        w = contact_fraction(u, self.half_span, self.path_length[:, None, None])
+        return u, w
+
+    def __call__(self, tau) -> tuple[Float[Array, "s j"], Float[Array, "s j"]]:
+        u, w = self.positions(tau)
+        n, m = self.n_planets, self.modifications
+        pbt = self.base_pitch
+        g = self.path_length[:, None, None]
+        relief = jnp.concatenate(
+            [
+                flank_pair_relief(m.sun, m.planet_sun_flank, u[:n], g[:n], pbt),
+                flank_pair_relief(m.planet_ring_flank, m.ring, u[n:], g[n:], pbt),
+            ]
+        )
+        h = relief + self.crowning[..., None]
+        gap = self.mismatch[..., None] - h
+        if self.errors is not None:
+            gap = gap + self.errors(tau)[:, None, None]
+        s = gap.shape[0] * gap.shape[1]
+        return gap.reshape(s, -1), w.reshape(s, -1)

@@ -1,0 +1,252 @@
+"""Helical planetary dynamic model: geometry, mesh stiffness, modifications, errors, solver, gradients.
+
+The stage is the wind-turbine parameter set (examples/dynamics/helical_wind_turbine.toml) reduced to 4 slices,
+4 mesh periods and 32 samples per period, the model of tests/test_helical_modification.py and of the notebook
+at its small size: they run on one worker (conftest.py) and share the compiled solves (`_fluctuation`,
+`_smooth_objective`); a solve takes ~0.07 s once compiled.
+"""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from gearte.core.signal import evaluate
+from gearte.drives.helical import EXAMPLE, HelicalPlanetary, load_helical
+from gearte.drives.helical_equations import MeshedSystem, loa_errors
+from gearte.drives.helical_geometry import geometry, iso6336_mesh_stiffness
+from gearte.drives.helical_modifications import StageModifications, ToothModification, crowning, flank_pair_relief
+from gearte.drives.helical_solve import PeriodicSolver, solve_periodic
+from gearte.drives.helical_stiffness import SlicedMeshes, pair_range
+from gearte.drives.planetary_2kh import Planetary2KH
+from gearte.drives.protocol import Eccentricity
+from gearte.optimise.helical_modification import _fluctuation, _smooth_objective
+
+#: The reduced solver of the helical tests and of the notebook at its small size (one compiled solve for all).
+SOLVER = PeriodicSolver(4, steps_per_period=256, samples_per_period=32)
+
+
+@pytest.fixture(scope="module")
+def model():
+    base = load_helical(EXAMPLE)
+    return HelicalPlanetary(base.stage, n_slices=4, solver=SOLVER)
+
+
+@pytest.fixture(scope="module")
+def response():
+    return eqx.filter_jit(lambda m, mods, errors: m.response(mods, errors))
+
+
+# ---------------------------------------------------------------- geometry, stiffness, modifications (no ODE)
+
+
+def test_geometry_matches_iso21771_by_hand_and_the_file_uses_iso6336_stiffness(model):
+    st = model.stage
+    g = geometry(st)
+    mn, b = 10.0, math.radians(11.5)  # the example's helix angle
+    mt = mn / math.cos(b)
+    at = math.atan(math.tan(math.radians(20)) / math.cos(b))
+    d = np.array([21, 39, 99]) * mt
+    db = d * math.cos(at)
+    da = d + np.array([2, 2, -2]) * mn
+    a = (d[0] + d[1]) / 2
+    pbt = math.pi * mt * math.cos(at)
+    eps_ext = (math.sqrt(da[0] ** 2 - db[0] ** 2) + math.sqrt(da[1] ** 2 - db[1] ** 2) - 2 * a * math.sin(at)) / (2 * pbt)
+    eps_int = (math.sqrt(da[1] ** 2 - db[1] ** 2) - math.sqrt(da[2] ** 2 - db[2] ** 2) + 2 * a * math.sin(at)) / (2 * pbt)
+    np.testing.assert_allclose(g.contact_ratio, [eps_ext, eps_int], rtol=1e-12)
+    np.testing.assert_allclose(g.overlap_ratio, 230 * math.sin(b) / (math.pi * mn), rtol=1e-12)
+    assert float(g.mesh_frequency) == pytest.approx(99 * 22 / 60)
+    _, c_gamma = iso6336_mesh_stiffness(st)
+    np.testing.assert_allclose(st.mesh_stiffness, c_gamma, atol=0.006)
+
+
+def _weights(model, n_slices, *, spur=False):
+    st = model.stage
+    g = geometry(st)
+    exc = SlicedMeshes(st, g, StageModifications(), None, n_slices=n_slices, pairs=pair_range(g, float(st.face_width), n_slices))
+    if spur:
+        exc = eqx.tree_at(lambda e: e.lead_shift, exc, jnp.zeros(n_slices))
+    taus = jnp.linspace(0.0, 1.0, 4000, endpoint=False)
+    _, w = eqx.filter_jit(lambda e, t: jax.vmap(e.positions)(t))(exc, taus)
+    return g, w  # (T, meshes, slices, pairs)
+
+
+def test_sliced_stiffness_has_the_iso_mean_and_the_spur_limit_alternates_single_double(model):
+    g, w = _weights(model, 8)
+    per_slice = jnp.sum(w, axis=-1)  # pairs in contact in each slice, averaged over its width
+    n = model.stage.n_planets
+    # Mean over a mesh period: ε_α pairs in every slice, so the mean mesh stiffness is c_γ b.
+    np.testing.assert_allclose(jnp.mean(per_slice, axis=0)[:n], float(g.contact_ratio[0]), rtol=1e-3)
+    np.testing.assert_allclose(jnp.mean(per_slice, axis=0)[n:], float(g.contact_ratio[1]), rtol=1e-3)
+    # Spur limit (every slice in phase): one or two pairs; two for a fraction ε_α − 1 of the period.
+    _, w = _weights(model, 8, spur=True)
+    total = np.asarray(jnp.mean(jnp.sum(w, axis=-1), axis=-1)[:, 0])
+    assert total.min() == pytest.approx(1.0, abs=1e-9) and total.max() == pytest.approx(2.0, abs=1e-9)
+    np.testing.assert_allclose(np.mean(total > 1.5), float(g.contact_ratio[0]) - 1, atol=0.05)
+
+
+def test_tip_relief_and_crowning_values():
+    g_alpha, pbt = 48.0, 30.0
+    default = g_alpha - pbt  # from the single/double-contact boundary to the tip
+    lin = ToothModification(40.0, crowning=12.0)
+    par = ToothModification(40.0, shape="parabolic")
+    none = ToothModification()
+    u = jnp.asarray([0.0, default / 2, default, g_alpha - default, g_alpha])
+    # `first`'s tip is at u = 0, `last`'s at u = g_α.
+    np.testing.assert_allclose(flank_pair_relief(lin, none, u, g_alpha, pbt), [40.0, 20.0, 0.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(flank_pair_relief(none, par, u, g_alpha, pbt), [0.0, 0.0, 0.0, 0.0, 40.0], atol=1e-12)
+    np.testing.assert_allclose(
+        flank_pair_relief(none, par, jnp.asarray(g_alpha - default / 2), g_alpha, pbt), 10.0, atol=1e-12
+    )  # parabolic: a quarter at half length
+    root = ToothModification(root_relief=8.0, root_relief_length=6.0)
+    np.testing.assert_allclose(flank_pair_relief(root, none, jnp.asarray([g_alpha, g_alpha - 3.0]), g_alpha, pbt), [8.0, 4.0])
+    np.testing.assert_allclose(crowning(lin, none, jnp.asarray([-115.0, 0.0, 57.5]), 230.0), [12.0, 0.0, 3.0])
+
+
+def test_eccentricities_are_the_kinematic_models_errors_on_the_lines_of_action(model):
+    """With rigid meshes, e_s + e_r of planet 1 turns the sun by Planetary2KH's TE (same sources, phases, frequencies)."""
+    st = model.stage
+    g = geometry(st)
+    rng = np.random.default_rng(3)
+    kin = Planetary2KH(
+        21,
+        39,
+        99,
+        module=float(g.transverse_module),
+        pressure_angle=float(g.transverse_pressure_angle),
+        input="carrier",
+        output="sun",
+        fixed="ring",
+    )
+    errors = {
+        name: Eccentricity(rng.uniform(1, 10, spec.shape), rng.uniform(0, 2 * np.pi, spec.shape))
+        for name, spec in kin.error_sources.items()
+    }
+    exc = loa_errors(st, g, errors)
+    taus = jnp.linspace(0.0, 99.0, 997)  # one carrier turn = z_ring mesh periods
+    e = eqx.filter_jit(lambda f, t: jax.vmap(f)(t))(exc, taus)
+    theta = 2 * jnp.pi * taus / 99
+    te = evaluate(kin.signal(errors), theta)
+    np.testing.assert_allclose(-kin._gain() * (e[:, 0] + e[:, 3]), te, rtol=1e-10, atol=1e-14)
+
+
+# ---------------------------------------------------------------- one mesh: the damped oscillator
+
+
+class _Sine(eqx.Module):
+    amplitude: jax.Array
+    phase: jax.Array
+
+    def __call__(self, tau):
+        return jnp.reshape(self.amplitude * jnp.sin(2 * jnp.pi * tau + self.phase), (1, 1)), jnp.ones((1, 1))
+
+
+EPS = 1.0 / (6 * math.pi) ** 2  # natural frequency 3 × the forcing
+ZETA = 0.2
+LOAD, AMP, PHASE = 50.0, 2.0, 0.7
+
+
+def _oscillator():
+    c = 2 * ZETA * math.sqrt(EPS)
+    return MeshedSystem(
+        mass=jnp.asarray([EPS]),
+        stiffness=jnp.zeros((1, 1)),
+        damping=jnp.zeros((1, 1)),
+        load=jnp.asarray([LOAD]),
+        projection=jnp.ones((1, 1)),
+        pair_stiffness=jnp.asarray([1.0]),
+        pair_damping=jnp.asarray([c]),
+        excitation=_Sine(jnp.asarray(AMP), jnp.asarray(PHASE)),
+        contact_smoothing=jnp.asarray(0.02),
+    )
+
+
+def _oscillator_solution(steps):
+    return eqx.filter_jit(solve_periodic)(_oscillator(), PeriodicSolver(10, steps_per_period=steps, samples_per_period=32))
+
+
+def test_single_mesh_with_sinusoidal_error_is_the_damped_oscillator_closed_form():
+    """ε q'' + c (q' + e') + k (q + e) = F with e = E sin(ωτ + φ): q = F/k + Im(Q e^{i(ωτ+φ)}), Q = −E (k + icω)/(k − εω² + icω)."""
+    sol = _oscillator_solution(128)
+    w, c = 2 * math.pi, 2 * ZETA * math.sqrt(EPS)
+    q_amp = -AMP * (1 + 1j * c * w) / (1 - EPS * w**2 + 1j * c * w)
+    exact = LOAD + np.imag(q_amp * np.exp(1j * (w * np.asarray(sol.tau) + PHASE)))
+    np.testing.assert_allclose(sol.q[:, 0], exact, atol=1e-7)
+    assert abs(q_amp) > 1.1 * AMP  # amplified near resonance: the test sees the dynamics, not the static limit
+
+
+def test_solution_converges_at_the_fifth_order_of_tsit5():
+    """Tsit5 is of order 5: the error falls at least 2⁵-fold per halving (about 2⁶ here: its leading error
+    terms are small on this linear problem) and far from the 2⁴ of a fourth-order method."""
+    ref = _oscillator_solution(1024).q[:, 0]
+    errs = [float(jnp.max(jnp.abs(_oscillator_solution(s).q[:, 0] - ref))) for s in (16, 32, 64)]
+    orders = np.log2(np.asarray(errs[:-1]) / np.asarray(errs[1:]))
+    assert np.all((orders > 4.7) & (orders < 6.5)), (errs, orders)
+
+
+# ---------------------------------------------------------------- the stage
+
+
+def test_constant_stiffness_and_no_excitation_give_no_fluctuation(model, response):
+    const = HelicalPlanetary(model.stage, n_slices=4, stiffness_model="mean", solver=SOLVER)
+    r = response(const, None, None)
+    assert float(jnp.max(r.fluctuation)) < 1e-9
+    assert float(r.output_te_peak_to_peak) < 1e-14
+    n = model.stage.n_planets
+    np.testing.assert_allclose(r.dte[:n, 0], r.dte[0, 0], rtol=1e-12)  # equal load sharing
+    np.testing.assert_allclose(r.dte[n:, 0], r.dte[n, 0], rtol=1e-12)
+
+
+def test_slow_speed_is_the_quasi_static_load_sharing_solution(model):
+    """At 22/40 rpm the lowest mode is 140 × the mesh frequency: q(τ) = K(τ)⁻¹ F(τ). The static sun mesh forces
+    carry the sun's torque T_c z_s/(z_s + z_r), a third per planet."""
+    st = eqx.tree_at(lambda s: s.carrier_speed, model.stage, jnp.asarray(22.0 / 40))
+    slow = HelicalPlanetary(st, n_slices=4, solver=PeriodicSolver(2, steps_per_period=12000, samples_per_period=32))
+    r = eqx.filter_jit(lambda m: m.response())(slow)
+    sys = eqx.filter_jit(lambda m: m.system())(slow)
+    taus = 1.0 + r.time / sys.mesh_period
+
+    @eqx.filter_jit
+    def static(sys, taus):
+        q = jax.vmap(sys.system.static)(taus)
+        return q, jax.vmap(sys.system.pair_forces)(taus, q, jnp.zeros_like(q))
+
+    q_static, f = static(sys, taus)
+    dte_static = (q_static @ sys.mid_projection.T).T
+    assert float(jnp.max(r.fluctuation)) > 0.5  # the stiffness varies: the reference is not a constant
+    np.testing.assert_allclose(r.dte, dte_static, atol=5e-3 * float(jnp.max(r.fluctuation)))
+    geom, n = sys.geometry, st.n_planets
+    f_mesh = jnp.sum(f.reshape(taus.shape[0], 2 * n, -1), axis=-1) * sys.reference_stiffness  # N
+    torque_sun = jnp.sum(f_mesh[:, :n], axis=-1) * jnp.cos(geom.base_helix_angle) * geom.base_radius[0] * 1e-3  # N·m
+    np.testing.assert_allclose(torque_sun, float(st.carrier_torque) * 21 / 120, rtol=1e-9)
+    per_planet = float(st.carrier_torque) * 21 / 120 / 3 / (float(jnp.cos(geom.base_helix_angle) * geom.base_radius[0]) * 1e-3)
+    np.testing.assert_allclose(jnp.mean(f_mesh[:, :n], axis=0), per_planet, rtol=1e-2)
+    np.testing.assert_allclose(r.mesh_force, f_mesh.T, rtol=5e-3)
+
+
+def test_gradient_of_the_fluctuation_matches_float64_finite_differences(model):
+    """Reverse mode through diffrax (RecursiveCheckpointAdjoint) on the smooth peak-to-peak, against central
+    differences of the same float64 computation (the optimiser's objective, `_smooth_objective`) along two
+    directions that mix all four amounts."""
+    x = jnp.asarray([20.0, 10.0, 20.0, 10.0])
+    ones = jnp.asarray([1.0, 1.0])
+    grad = eqx.filter_jit(jax.grad(lambda x, m: jnp.sum(m.fluctuation(x, smooth=0.02))))(x, model)
+    assert bool(jnp.all(jnp.isfinite(grad))) and float(jnp.max(jnp.abs(grad))) > 1e-2  # the amounts matter
+    h = 1e-3
+    for v in (jnp.asarray([1.0, -0.5, 0.3, 0.8]), jnp.asarray([-0.2, 0.9, 1.0, -0.6])):
+        fd = (_smooth_objective(model, x + h * v, ones, 0.02) - _smooth_objective(model, x - h * v, ones, 0.02)) / (2 * h)
+        np.testing.assert_allclose(grad @ v, fd, rtol=1e-6, atol=1e-8)
+
+
+def test_vmap_over_amounts_and_planet_rotation_symmetry(model):
+    xs = jnp.asarray([[0.0, 0.0, 0.0, 0.0], [30.0, 20.0, 10.0, 40.0]])
+    batched = eqx.filter_jit(jax.vmap(lambda x, m: m.fluctuation(x), in_axes=(0, None)))(xs, model)
+    one = jnp.stack([_fluctuation(model, x) for x in xs])
+    np.testing.assert_allclose(batched, one, rtol=1e-10)
+    assert not np.allclose(one[0], one[1], rtol=1e-3)
+    # Turning the whole stage (isotropic supports, no gravity) changes nothing.
+    turned = eqx.tree_at(lambda m: m.stage.planet_angles, model, model.stage.planet_angles + 0.4)
+    np.testing.assert_allclose(_fluctuation(turned, xs[1]), one[1], rtol=1e-8)

@@ -1,0 +1,174 @@
+"""Scale-out of the Monte Carlo engine: devices, processes, streaming (bit-identity and exactness)."""
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gearte
+from gearte.cli.config import load_study
+from gearte.studies.streaming import StreamingStatistics
+
+ROOT = Path(__file__).resolve().parents[1]
+PLANETARY = "examples/planetary_wang2013_random.toml"
+
+
+@pytest.fixture(scope="module")
+def study():
+    s = load_study(PLANETARY)
+    return gearte.TEStudy(s.drive, s.errors, metric=gearte.Peak())
+
+
+def _env(**extra):
+    env = dict(os.environ)
+    env.update(extra)
+    return env
+
+
+def test_four_devices_give_the_values_of_one(study, tmp_path):
+    # A step runs one block per device with the program one device runs: the values cannot depend on the
+    # device count (here 4 forced host devices in a fresh interpreter, against this process's one).
+    one = gearte.monte_carlo(study, key=3, n_samples=700, block_size=64, chunk_size=64)
+    assert one.devices == 1
+    script = textwrap.dedent(
+        f"""
+        import jax, numpy as np
+        jax.config.update("jax_enable_x64", True)
+        import gearte
+        from gearte.cli.config import load_study
+        s = load_study({PLANETARY!r})
+        st = gearte.TEStudy(s.drive, s.errors, metric=gearte.Peak())
+        out = {{}}
+        for chunk in (64, 1000):
+            r = gearte.monte_carlo(st, key=3, n_samples=700, block_size=64, chunk_size=chunk)
+            assert r.devices == 4, r.devices
+            out[f"c{{chunk}}"] = r.values
+        np.savez({str(tmp_path / "four.npz")!r}, **out)
+        """
+    )
+    env = _env(XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
+    subprocess.run([sys.executable, "-c", script], cwd=ROOT, env=env, check=True, timeout=300)
+    four = np.load(tmp_path / "four.npz")
+    for k in four.files:
+        np.testing.assert_array_equal(four[k], one.values)
+
+
+def test_streamed_chunks_are_the_held_values(study):
+    held = gearte.monte_carlo(study, key=5, n_samples=1000, block_size=64).values
+    seen: list = []
+    r = gearte.monte_carlo(
+        study, key=5, n_samples=1000, block_size=64, chunk_size=200, keep=False, on_chunk=lambda s, v: seen.append((s, v))
+    )
+    assert r.values is None
+    starts = [s for s, _ in seen]
+    assert starts == sorted(starts) and starts[0] == 0 and len(seen) > 1
+    np.testing.assert_array_equal(np.concatenate([v for _, v in seen]), held)
+    with pytest.raises(ValueError, match="on_chunk"):
+        gearte.monte_carlo(study, key=5, n_samples=10, keep=False)
+
+
+def test_streaming_statistics_of_a_study_match_the_exact_ones(study):
+    held = gearte.monte_carlo(study, key=9, n_samples=5000, block_size=256).values
+    acc = StreamingStatistics(block=1024)
+    gearte.monte_carlo(study, key=9, n_samples=5000, block_size=256, chunk_size=700, keep=False, on_chunk=lambda s, v: acc.update(v))
+    exact = gearte.statistics(held)
+    got = acc.statistics()
+    assert (got.n, got.min, got.max) == (exact.n, exact.min, exact.max)
+    np.testing.assert_allclose([got.mean, got.std], [exact.mean, exact.std], rtol=1e-13)
+    bounds = acc.quantile_errors()
+    for p, v in exact.percentiles.items():
+        assert abs(got.percentiles[p] - v) <= bounds[p], p
+    i = acc.sample_near(exact.percentiles["50"])
+    assert abs(held[i] - exact.percentiles["50"]) <= 2.0**-13 * abs(exact.percentiles["50"]) + 1e-3 * exact.std
+
+
+def _cli(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "gearte", *args], cwd=ROOT, capture_output=True, text=True, timeout=300, **kw)
+
+
+@pytest.fixture(scope="module")
+def single_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("single") / "run"
+    r = _cli("run", PLANETARY, "--samples", "3000", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_two_processes_write_the_single_process_results(single_run, tmp_path):
+    # jax.distributed on 127.0.0.1 (CPU collectives through gloo): each process computes its share of the
+    # samples, process 0 writes the results once: the same values as one process.
+    out = tmp_path / "multi"
+    coord = f"127.0.0.1:{_free_port()}"
+    cmd = [
+        sys.executable,
+        "-m",
+        "gearte",
+        "run",
+        PLANETARY,
+        "--samples",
+        "3000",
+        "--out",
+        str(out),
+        "--processes",
+        "2",
+        "--coordinator",
+        coord,
+    ]
+    procs = [
+        subprocess.Popen([*cmd, "--process-id", str(i)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        for i in (0, 1)
+    ]
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], outs
+    a, b = np.load(single_run / "samples.npz"), np.load(out / "samples.npz")
+    np.testing.assert_array_equal(a["te_rad"], b["te_rad"])
+    s = json.loads((out / "summary.json").read_text())
+    assert s["processes"] == 2 and s["devices"] >= 2  # each process's devices (the CLI makes one per core)
+    assert json.loads((single_run / "summary.json").read_text())["te"] == s["te"]
+
+
+@pytest.mark.parametrize(
+    "args, match",
+    [
+        (["--processes", "2"], "all three"),
+        (["--processes", "2", "--process-id", "2", "--coordinator", "127.0.0.1:1"], "process-id"),
+        (["--processes", "2", "--process-id", "0", "--coordinator", "nohostport"], "HOST:PORT"),
+        (["--cluster", "--processes", "2"], "--cluster"),
+    ],
+)
+def test_bad_process_options_are_refused(args, match, tmp_path):
+    r = _cli("run", PLANETARY, "--samples", "10", "--out", str(tmp_path / "x"), *args)
+    assert r.returncode == 2 and match in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_streamed_run_reports_exact_moments_and_bounded_percentiles(single_run, tmp_path, monkeypatch):
+    import gearte.cli.run as run_mod
+    from gearte.cli.main import main
+
+    monkeypatch.setattr(run_mod, "HOLD_BYTES", 1000)  # stream this small study
+    out = tmp_path / "streamed"
+    assert main(["run", PLANETARY, "--samples", "3000", "--out", str(out), "--keep-samples", "--no-progress"]) == 0
+    held = json.loads((single_run / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text())
+    assert "streamed" in s and "streamed" not in held
+    assert not (out / "samples.npz").exists()
+    for k in ("n", "min", "max"):
+        assert s["te"][k] == held["te"][k]
+    np.testing.assert_allclose([s["te"]["mean"], s["te"]["std"]], [held["te"]["mean"], held["te"]["std"]], rtol=1e-13)
+    for p, v in held["te"]["percentiles"].items():
+        assert abs(s["te"]["percentiles"][p] - v) <= s["streamed"]["percentile_error_bounds"][p]
+    np.testing.assert_array_equal(np.load(out / "samples_te.npy"), np.load(single_run / "samples.npz")["te"])
+    assert "Streamed study" in (out / "report.md").read_text()
+    assert s["typical_sample"]["index"] == held["typical_sample"]["index"]

@@ -1,0 +1,94 @@
+"""Start-up: importing gearte and asking the command for help import neither JAX nor matplotlib.
+
+Each check runs in a fresh interpreter (a subprocess), since this one has JAX loaded already.
+"""
+
+import ast
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import gearte
+
+ROOT = Path(__file__).resolve().parents[1]
+HEAVY = ("jax", "jaxlib", "equinox", "matplotlib", "scipy", "optimistix", "numpy")
+
+
+def fresh(code: str) -> dict:
+    """Run `code` in a new interpreter; it prints one JSON line, returned."""
+    env = {k: v for k, v in os.environ.items() if k not in ("JAX_ENABLE_X64", "MPLBACKEND")}
+    env["PYTHONPATH"] = str(ROOT)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+LOADED = f"import json, sys; print(json.dumps(sorted(m for m in {HEAVY!r} if m in sys.modules)))"
+
+
+def test_import_gearte_loads_nothing_heavy():
+    assert fresh("import gearte, gearte.cli; " + LOADED) == []
+
+
+def test_a_name_loads_its_module_on_first_use():
+    # A drive needs JAX; a study file's header needs nothing heavy.
+    assert "jax" in fresh("import gearte; gearte.Planetary2KH; " + LOADED)
+    assert fresh("import gearte.cli.config as c; c.check_file('examples/planetary_wang2013_random.toml'); " + LOADED) == []
+
+
+def test_help_of_every_command_loads_nothing_heavy():
+    code = (
+        "import contextlib, io, json, sys\n"
+        "from gearte.cli.main import _parser\n"
+        "p = _parser()\n"
+        "for cmd in ([], ['run'], ['check'], ['compare'], ['grade'], ['identify'], ['assemble']):\n"
+        "    with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        "        p.parse_args([*cmd, '--help'])\n" + LOADED
+    )
+    assert fresh(code) == []
+
+
+def test_every_public_name_resolves_and_is_declared_for_type_checkers():
+    for name in gearte.__all__:
+        assert getattr(gearte, name) is not None, name
+    assert set(gearte.__all__) <= set(dir(gearte))
+    # The names the type checkers see (the `if TYPE_CHECKING:` imports) are exactly the public ones.
+    tree = ast.parse((ROOT / "gearte" / "__init__.py").read_text())
+    block = next(n for n in tree.body if isinstance(n, ast.If) and getattr(n.test, "id", None) == "TYPE_CHECKING")
+    declared = {a.asname or a.name for n in block.body if isinstance(n, (ast.Import, ast.ImportFrom)) for a in n.names}
+    assert declared == set(gearte.__all__) - {"__version__"}
+    with pytest.raises(AttributeError, match="no_such_name"):
+        gearte.no_such_name  # noqa: B018
+
+
+def test_kind_tables_of_the_first_checks_match_the_study_kinds():
+    from gearte.cli.config import KIND_TABLES
+    from gearte.cli.kinds import STUDY_KINDS
+
+    assert KIND_TABLES == tuple(k.table for k in STUDY_KINDS)
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("[studdy]\nname = 'x'\n", "unknown table `[studdy]` (did you mean `[study]`?)"),
+        ("[study]\nname = 'a b'\nseed = 1\n[drive]\ntype = 'planetary_2kh'\n", "[study] name: use letters"),
+        ("[study]\nname = 'a'\nseed = 1\n[drive]\ntype = 3\n", "[drive] type: expected a string"),
+        ("[study]\nname = 'a'\n", "missing required key `seed`"),
+        ("[study\n", "not valid TOML"),
+    ],
+)
+def test_check_names_a_broken_file_without_importing_jax(tmp_path, text, message):
+    study = tmp_path / "s.toml"
+    study.write_text(text)
+    code = (
+        "import contextlib, io, json, sys\nfrom gearte.cli.main import main\nerr = io.StringIO()\n"
+        f"with contextlib.redirect_stderr(err):\n    status = main(['check', {str(study)!r}])\n"
+        "print(json.dumps([status, err.getvalue(), sorted(m for m in ('jax', 'equinox', 'matplotlib') if m in sys.modules)]))"
+    )
+    status, err, loaded = fresh(code)
+    assert status == 2 and message in err and loaded == [], (status, err, loaded)
