@@ -20,10 +20,13 @@ convex potential
     Φ(q) = Σ ½ k max(0, g·q + e)² + Σ_bearings Σ_f ½ k_b max(0, n_f·(B q + e_b) − c)² + ½ μ |q|² − f·q
 
 (½ k_b |B q + e_b|² for a bearing without clearance), where the tiny μ makes the minimiser
-unique: a part left floating inside its clearances, held by no contact, stays at its nominal
-position (μ moves nothing that a contact holds: it adds μ|q| ≈ 1e-14 of the stiffness × mm to the
-forces). `solve` minimises Φ by Newton's method with an exact line search (a safeguarded Newton
-iteration on the monotone directional derivative). As Φ is piecewise quadratic, the iteration ends
+unique. `solve` takes it proximal to the starting point, ½ μ |q − q₀|², so a part left floating
+inside its clearances, held by no contact, stays where the start put it (the neighbouring solution
+along the grid) instead of being pulled back to nominal across every contact in its way; μ moves
+nothing that a contact holds (it adds μ|q − q₀| ≈ 1e-15 of the stiffness × mm to the forces).
+`solve` minimises Φ by Newton's method with an exact line search: φ′(t) along a Newton direction is
+piecewise linear and increasing, so the search walks from kink to kink (a contact or a bearing face
+that opens or closes) to the piece that holds its root. As Φ is piecewise quadratic, the iteration ends
 in finitely many steps: once the set of closed contacts is found the full Newton step lands on the
 minimum, and the iteration stops when the force residual is at rounding level relative to the
 largest force in the system (the load, or the contact forces where the errors preload the parts).
@@ -63,10 +66,8 @@ MAX_STEPS = 200
 ROUNDING_FACTOR = 64.0
 #: Sufficient decrease (Armijo) for taking the full Newton step without a line search.
 ARMIJO = 1e-4
-#: Largest number of safeguarded Newton iterations of the exact line search along each Newton direction.
-LINE_SEARCH_STEPS = 40
-#: The line search stops when the directional derivative has fallen below this fraction of its value at the start.
-LINE_SEARCH_RTOL = 1e-9
+#: Largest number of kinks the exact line search crosses along one Newton direction.
+LINE_SEARCH_STEPS = 64
 
 _ANGLES = 2 * math.pi * np.arange(BEARING_FACES) / BEARING_FACES
 #: Unit outward normals of the faces (M × 2).
@@ -157,55 +158,46 @@ def hessian(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, "n n"]:
     return H + s.mu * jnp.eye(n, dtype=q.dtype)
 
 
-def _line_derivatives(s: ContactSystem, q, dq):
-    """φ(t) = Φ(q + t dq): a function of t giving (φ′(t), φ″(t)) (φ″ the right derivative), each in O(m + b M)."""
-    N = _normals(q.dtype)
-    a, b = s.G @ q + s.e, s.G @ dq
-    r0, rb = _relative(s, q), jnp.einsum("bin,n->bi", s.B, dq)
-    fa, fb = r0 @ N.T - s.c[:, None], rb @ N.T  # face penetrations along the line: fa + t fb
-    poly = s.c > 0
-    kp = jnp.where(poly, s.kb, 0.0)[:, None]
-    ks = jnp.where(poly, 0.0, s.kb)
-    r0rb, rb2 = jnp.sum(r0 * rb, axis=-1), jnp.sum(rb * rb, axis=-1)
-    lin0 = s.mu * jnp.dot(q, dq) - jnp.dot(s.f, dq) + jnp.sum(ks * r0rb)
-    lin1 = s.mu * jnp.dot(dq, dq) + jnp.sum(ks * rb2)
-
-    def derivatives(t):
-        p = a + t * b
-        pf = fa + t * fb
-        d1 = jnp.sum(s.k * jnp.maximum(p, 0.0) * b) + jnp.sum(kp * jnp.maximum(pf, 0.0) * fb) + lin0 + t * lin1
-        d2 = jnp.sum(jnp.where(p > 0, s.k * b * b, 0.0)) + jnp.sum(jnp.where(pf > 0, kp * fb * fb, 0.0)) + lin1
-        return d1, d2
-
-    return derivatives
-
-
 def _line_search(s: ContactSystem, q, dq):
-    """The step t > 0 that minimises Φ(q + t dq): safeguarded Newton on the monotone, piecewise-linear φ′(t), from
-    t = 1 (the Newton step, exact where no contact changes state), bisecting where a step leaves the bracket."""
-    derivatives = _line_derivatives(s, q, dq)
-    d0, _ = derivatives(jnp.zeros((), dtype=q.dtype))
-    tol = LINE_SEARCH_RTOL * jnp.abs(d0)
-    one = jnp.ones((), dtype=q.dtype)
+    """The step t > 0 that minimises Φ(q + t dq), exactly: φ′(t) is piecewise linear and increasing, with a kink
+    wherever a unilateral contact or a bearing face opens or closes. From t = 0 the walk takes the root of φ′ on the
+    piece it stands on if that root lies before the next kink, or moves to that kink; each step crosses one kink
+    (a contact that closes usually stops the walk at once). Out of steps: the last kink reached (φ decreases up to
+    it)."""
+    N = _normals(q.dtype)
+    poly = s.c > 0
+    kb = jnp.where(poly, s.kb, 0.0)
+    ks = jnp.where(poly, 0.0, s.kb)
+    r0, rb = _relative(s, q), jnp.einsum("bin,n->bi", s.B, dq)
+    # Every row as one piece a + t b with stiffness w: the unilateral contacts, then the faces of every bearing.
+    a = jnp.concatenate([s.G @ q + s.e, jnp.ravel(r0 @ N.T - s.c[:, None])])
+    b = jnp.concatenate([s.G @ dq, jnp.ravel(rb @ N.T)])
+    w = jnp.concatenate([s.k, jnp.ravel(jnp.broadcast_to(kb[:, None], (kb.shape[0], N.shape[0])))])
+    # The smooth part: regularisation, load and the bearings without clearance (plain springs).
+    lin0 = s.mu * jnp.dot(q, dq) - jnp.dot(s.f, dq) + jnp.sum(ks * jnp.sum(r0 * rb, axis=-1))
+    lin1 = s.mu * jnp.dot(dq, dq) + jnp.sum(ks * jnp.sum(rb * rb, axis=-1))
+    crossing = (w > 0) & (b != 0)
+    kink = jnp.where(crossing, -a / jnp.where(b != 0, b, 1.0), jnp.inf)
+    zero = jnp.zeros((), dtype=q.dtype)
 
     def cond(state):
-        _, _, _, k, done = state
+        _, _, k, done = state
         return (~done) & (k < LINE_SEARCH_STEPS)
 
     def body(state):
-        t, lo, hi, k, _ = state
-        d1, d2 = derivatives(t)
-        done = jnp.abs(d1) <= tol
-        lo = jnp.where(d1 < 0, t, lo)
-        hi = jnp.where(d1 >= 0, t, hi)
-        tn = t - d1 / d2
-        tn = jnp.where((tn > lo) & (tn < hi), tn, jnp.where(jnp.isfinite(hi), 0.5 * (lo + hi), 2.0 * t))
-        return jnp.where(done, t, tn), lo, hi, k + 1, done
+        t, _, k, _ = state
+        nxt = jnp.min(jnp.where(kink > t, kink, jnp.inf))
+        mid = jnp.where(jnp.isfinite(nxt), 0.5 * (t + nxt), t + 1.0)
+        p = a + t * b
+        d1 = jnp.sum(w * jnp.maximum(p, 0.0) * b) + lin0 + t * lin1
+        slope = jnp.sum(jnp.where(a + mid * b > 0, w * b * b, 0.0)) + lin1
+        root = t - d1 / slope
+        done = root <= nxt
+        return jnp.where(done, root, nxt), t, k + 1, done
 
-    state = (one, 0.0 * one, jnp.inf * one, jnp.asarray(0), jnp.asarray(False))
-    t, lo, _, _, done = jax.lax.while_loop(cond, body, state)
-    # Out of iterations: the last point known to lie before the minimum (φ decreases up to it).
-    return jnp.where(done | (lo <= 0), t, lo)
+    t, last, _, done = jax.lax.while_loop(cond, body, (zero, zero, jnp.asarray(0), jnp.asarray(False)))
+    del last, done  # out of steps: t is the last kink reached, where φ is still decreasing
+    return t
 
 
 def _rounding_floor(s: ContactSystem, q):
@@ -253,6 +245,12 @@ def _newton(s: ContactSystem, q0):
     return q, ok, steps
 
 
+#: `_newton`, one solve after another under `vmap` (`jax.custom_batching.sequential_vmap`): a batched while loop
+#: would run every solve of a batch for as many iterations as its slowest one. Its inputs carry no derivative (the
+#: implicit-function step in `solve` differentiates), so it needs no derivative rule of its own.
+_newton_each = jax.custom_batching.sequential_vmap(_newton)
+
+
 def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium:
     """Minimise the contact potential of `s` (see the module notes); differentiable by the implicit-function theorem.
 
@@ -260,14 +258,17 @@ def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium
 
     **Returns:** an `Equilibrium` (its `result` is `RESULTS.successful` or `RESULTS.nonlinear_max_steps_reached`).
     """
+    start = jnp.zeros_like(s.f) if q0 is None else jax.lax.stop_gradient(q0)
+    # The regularisation is proximal to the start: ½ μ |q − q0|² (a load μ q0 added), so a part that floats keeps its
+    # position instead of being sent back to nominal across every contact in its way.
+    s = eqx.tree_at(lambda t: t.f, s, s.f + s.mu * start)
     ss = jax.tree.map(jax.lax.stop_gradient, s)
-    start = jnp.zeros_like(ss.f) if q0 is None else jax.lax.stop_gradient(q0)
-    q_star, ok, steps = _newton(ss, start)
+    q_star, ok, steps = _newton_each(ss, start)
     cho = (jax.lax.stop_gradient(jnp.linalg.cholesky(hessian(ss, q_star))), True)
     # One Newton step with the Hessian held: the value stays, the derivative is the implicit one.
     q = q_star - jax.scipy.linalg.cho_solve(cho, gradient(s, q_star))
     # The rigid limit: remove the part of q proportional to the load for the closed contacts.
-    q_rigid = q - jax.scipy.linalg.cho_solve(cho, s.f)
+    q_rigid = q - jax.scipy.linalg.cho_solve(cho, s.f - s.mu * start)
     force = s.k * jnp.maximum(s.G @ q + s.e, 0.0)
     _, bf, _ = _bearing_local(s, _relative(s, q))
     b2 = jnp.sum(bf * bf, axis=-1)
