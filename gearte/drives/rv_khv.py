@@ -159,6 +159,13 @@ SOURCES = {
     "backlash": ("deviation", "", "µm", "j_n", "normal backlash of the sun–planet meshes, from nominal"),
     "sun_eccentricity": ("eccentricity", "1", "µm", "e_s", "sun eccentricity (run-out), turning with the sun"),
     "planet_eccentricity": ("eccentricity", "N", "µm", "e_g", "eccentricity of each planet, turning with it"),
+    "planet_assembly": (
+        "deviation",
+        "N",
+        "rad",
+        "φ_g",
+        "assembly phase of each planet on its crank (whole teeth: 2π k / z_g), added to its eccentricity's phase",
+    ),
 }
 
 

@@ -163,7 +163,7 @@ def rv_system(drive: RVKHV, err: dict, theta_out, load_sign) -> ContactSystem:
     E_sun = se.magnitude[0] * UM * _dir(se.phase[0] + th_in)
     for i in range(Nc):
         ch, th = _dir(zeta[i]), _dir(zeta[i] + math.pi / 2)
-        E_pl = pe.magnitude[i] * UM * _dir(pe.phase[i] + planet_rot)
+        E_pl = pe.magnitude[i] * UM * _dir(pe.phase[i] + err["planet_assembly"][i] + planet_rot)
         for flank in (1.0, -1.0):
             nvec = flank * jnp.cos(alpha) * th + jnp.sin(alpha) * ch
             row = zeros.at[0].set(nvec[0]).at[1].set(nvec[1]) - body_row(2 + 3 * i, nvec, -rp * ch)
