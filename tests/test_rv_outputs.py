@@ -19,7 +19,7 @@ import pytest
 
 from gearte.core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD
 from gearte.drives.protocol import AbstractStudyContext, Eccentricity
-from gearte.drives.rv_khv import LostMotion, PeakToPeak, RVKHV
+from gearte.drives.rv_khv import RVKHV, LostMotion, PeakToPeak
 from gearte.drives.rv_khv_outputs import (
     LOADED_FRACTION,
     alias_order,
@@ -121,7 +121,7 @@ def test_drive_orders_and_trace_lines_from_the_kinematics(drive):
 
 
 def test_reference_unit_without_errors_has_no_te_and_no_play(drive):
-    s, c = reference_unit(drive, None)
+    s, _ = reference_unit(drive, None)
     ref = s["reference_unit"]
     assert ref["te_p2p_forward_arcsec"] == pytest.approx(0.0, abs=1e-7)
     assert ref["te_p2p_reverse_arcsec"] == pytest.approx(0.0, abs=1e-7)
