@@ -34,6 +34,7 @@ from gearte.drives.rv_khv_outputs import (
     study_outputs,
     typical_index,
 )
+from gearte.drives.rv_khv_report import report
 from gearte.studies.montecarlo import statistics
 
 ZP, R, RPIN, A = 20, 50.0, 2.5, 1.5
@@ -250,6 +251,8 @@ def test_study_outputs_draw_every_figure_the_report_shows(drive, metric, tmp_pat
     assert shown == {f.filename for f in out.figures}
     assert all((tmp_path / name).stat().st_size > 0 for name in shown)
     assert "WARNING" not in text
+    bad = out.summary | {"monte_carlo": out.summary["monte_carlo"] | {"negative_lost_motion_fraction": 0.5}}
+    assert "WARNING: lost motion below" in "\n".join(report(drive, bad, metric=metric.name))
     # The lost motion's histogram is the generic histogram.png when it is the study's metric, never drawn twice.
     mc = next(f for f in out.figures if f.filename == "monte_carlo.png")
     labels = [s[0] for s in mc.data["series"]]

@@ -56,7 +56,8 @@ CONVENTIONS = {
     "lost_motion": "TE(+) − TE(−) at each output angle: the output's rotation between the two load directions with the "
     "input held; it is ≥ 0 at equilibrium (the minimiser of a convex potential is monotone in the load), and within "
     f"{RESOLUTION_LOADS:g} × deflection_mm / R of 0 it is taken as 0: the parts are preloaded (errors forced into the "
-    "hyperstatic assembly hold the output in both directions); below that, negative, it marks a failed solve",
+    "hyperstatic assembly hold the output in both directions); a value below −that is not the rigid limit of an equilibrium (flagged in the report: the small load then "
+    "deflects the unit far more than deflection_mm / R, and removing its elastic part extrapolates too far)",
     "reference_unit": "the study's typical sample (metric closest to the median), the unit of trace.png",
     "grid": "the report grid of the drive (trace_points output angles, evenly spaced over one output revolution, from "
     "θ_o = 0); values are taken at these angles, not between them",

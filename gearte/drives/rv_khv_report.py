@@ -38,7 +38,16 @@ def report(drive: RVKHV, s: dict, *, metric: str) -> list[str]:
             + ", ".join(f"#{b['index']} ({100 * b['solved_share']:.2f} % solved)" for b in sv["failed_samples"])
             + ("…" if sv["samples_with_failed_solves"] > len(sv["failed_samples"]) else "")
             + f"); reference unit: {ref['solves']['successful']} of {ref['solves']['count']} solves succeeded. "
-            "The values of those samples are not those of an equilibrium.",
+            "Those samples' values include angles where the solve did not converge.",
+            "",
+        ]
+    if ref["negative_lost_motion"] or mc["negative_lost_motion_fraction"]:
+        L += [
+            f"**WARNING: lost motion below −{mc['lost_motion_resolution_arcsec']:.2g}″** (TE(+) < TE(−), which no "
+            "equilibrium gives): "
+            + (f"the reference unit (min {ref['lost_motion_arcsec']['min']:.3f}″); " if ref["negative_lost_motion"] else "")
+            + f"{100 * mc['negative_lost_motion_fraction']:.2f} % of the Monte Carlo samples. Their solves reported success; "
+            "the values there are not rigid-limit equilibria.",
             "",
         ]
     g = ref["grid"]
@@ -64,8 +73,7 @@ def report(drive: RVKHV, s: dict, *, metric: str) -> list[str]:
         "",
         f"The maximum is at θ_o = {ref['lost_motion_max_at_output_deg']:.3f}°; the lost motion is 0 (within "
         f"{mc['lost_motion_resolution_arcsec']:.2g}″: the parts preloaded, no play) at {100 * ref['zero_lost_motion_share']:.1f} % "
-        "of the angles."
-        + (" **It is negative beyond that somewhere: those solves are not equilibria.**" if ref["negative_lost_motion"] else ""),
+        "of the angles." + (" **It is negative beyond that somewhere (see the warning above).**" if ref["negative_lost_motion"] else ""),
         "",
         "![TE for both load directions](te_both_directions.png)",
         "",
@@ -128,7 +136,7 @@ def report(drive: RVKHV, s: dict, *, metric: str) -> list[str]:
         f"Reducers with no play somewhere on the grid (lost motion min within {mc['lost_motion_resolution_arcsec']:.2g}″ of 0: "
         f"errors forced into the hyperstatic assembly preload the parts): {100 * mc['zero_lost_motion_somewhere_fraction']:.2f} %"
         + (
-            f"; **with a negative lost motion beyond that (not an equilibrium): {100 * mc['negative_lost_motion_fraction']:.2f} %**."
+            f"; **with a negative lost motion beyond that (see the warning above): {100 * mc['negative_lost_motion_fraction']:.2f} %**."
             if mc["negative_lost_motion_fraction"]
             else "; none has a negative lost motion beyond it."
         ),
