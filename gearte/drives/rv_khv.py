@@ -58,7 +58,7 @@ from ..core.units import ARCSEC_PER_RAD, TWO_PI
 from ..core.validate import as_float, as_int
 from .cycloid_pin import CycloidPin
 from .cycloid_pin_geometry import CycloidModification
-from .protocol import AbstractGridDrive, Eccentricity, SourceSpec, Trace
+from .protocol import AbstractGridDrive, AbstractStudyContext, Eccentricity, SourceSpec, StudyOutputs, Trace
 from .rv_khv_contacts import dof_count, output_index, rv_system
 from .rv_khv_equilibrium import solve
 
@@ -414,6 +414,13 @@ class RVKHV(AbstractGridDrive):
             "lost_motion_min": jnp.min(te[0] - te[1]),
             "solved": jnp.mean((response.result == RESULTS.successful).astype(float)),
         }
+
+    def study_outputs(self, context: AbstractStudyContext) -> StudyOutputs:
+        """The typical unit's TE under both loads, its spectrum and contact map, and the Monte Carlo of the per-sample
+        outputs, with their plots and report (see `gearte.drives.rv_khv_outputs`)."""
+        from .rv_khv_outputs import study_outputs
+
+        return study_outputs(self, context)
 
 
 @eqx.filter_jit
