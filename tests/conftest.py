@@ -50,6 +50,8 @@ GROUPS = {
     "test_doe_cli": "doe",
     "test_helical": "helical",
     "test_helical_modification": "helical",
+    "test_rv": "rv",
+    "test_rv_outputs": "rv",
 }
 #: Notebook → the group of the tests of its subject (unlisted notebooks: group "notebooks").
 NOTEBOOK_GROUPS = {
@@ -67,6 +69,7 @@ COST_S = {
     "identification": 120,
     "harmonic": 130,
     "helical": 130,
+    "rv": 120,
     "test_contract": 105,
     "doe": 45,
     "planetary": 75,

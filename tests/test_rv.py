@@ -228,3 +228,30 @@ def test_the_rigid_limit_of_the_solver_is_exact_for_the_closed_contacts():
     assert closed.any()
     np.testing.assert_allclose(p[closed], 0.0, atol=1e-13)
     assert math.isfinite(float(eq.q_rigid[2]))
+
+
+def test_best_planet_assembly_is_a_coordinate_optimum_of_the_units_te():
+    """The search's positions: no single planet's other position gives a smaller TE p-p (each checked through the
+    drive's own response, not the search's batched one), the value is that of the drive at those positions, and
+    it is not above the start's."""
+    from gearte.optimise.rv_assembly import best_planet_assembly
+
+    d = make(z_sun=12, z_planet=12, points=16)
+    run_out = Eccentricity(jnp.asarray([12.0, 8.0, 10.0]), jnp.asarray([0.3, 2.0, 4.1]))
+    errors = {"planet_eccentricity": run_out, "sun_eccentricity": Eccentricity(jnp.asarray([6.0]), jnp.asarray([1.0]))}
+    out = best_planet_assembly(d, errors, metric="peak_to_peak")
+    assert bool(out.result == RESULTS.successful)
+    teeth = np.asarray(out.teeth)
+    metric = d.metrics["peak_to_peak"]
+
+    def pp(k):
+        return float(metric(d, d.response(dict(errors, planet_assembly=2 * np.pi * np.asarray(k, dtype=float) / d.z_planet))))
+
+    assert float(out.value) == pytest.approx(pp(teeth), rel=1e-9)
+    assert float(out.value) <= float(out.start) + 1e-15
+    assert float(out.start) == pytest.approx(pp([0, 0, 0]), rel=1e-9)
+    for i in range(d.cranks):
+        for k in range(d.z_planet):
+            other = teeth.copy()
+            other[i] = k
+            assert pp(other) >= float(out.value) * (1 - 1e-9), (i, k)
