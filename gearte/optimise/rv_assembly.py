@@ -113,7 +113,8 @@ def best_planet_assembly(
     err = drive.errors(errors)
     v0, ok0 = _evaluate(drive, err, jnp.asarray(teeth), metric)
     best, evaluations, rounds = float(v0), 1, 0
-    for rounds in range(1, rounds_max + 1):
+    while rounds < rounds_max:
+        rounds += 1
         changed = False
         for i in range(n):
             values, ok = _candidates(drive, err, i, jnp.asarray(teeth), metric)
