@@ -35,13 +35,13 @@ is the elastic compromise of the preloaded contacts (it depends on the stiffness
 
 **Accuracy.** The contacts are exact in the disc's rotation and linear in its translation (each pin's normal taken
 through the pitch point, `gearte.drives.rv_khv_contacts`); the 64-gon lies outside the circle by at most
-1.2e-3 c. Against the exact optimum over centres (the cycloid model's contact at 8 rings × 180 directions of fixed
-centres within the clearance, 13 input angles): for Yao & Liang's modified reducer (clearance 57.5 µm) the
-floating rotations are within 7e-6 rad (1.4″); for the unmodified one, whose disc is held by pins near the
-bottoms of the tooth spaces, the forward rotation falls short by up to 8e-5 rad (17″) and the reverse by up to
-2.6e-5 rad, against a lost motion of 3–4′: those pins have short lever arms, and their contact point moves along
-the flank as the centre moves tens of µm (linearising again about the centre found does not remove it). The
-torque is a pure couple on the disc: the output mechanism (pins in the disc's holes) is not modelled.
+1.2e-3 c. A pin at the bottom of a tooth space has no lever arm, and its equivalent error −l Δθ would lose its gap:
+there (|l| < `LEVER_FLOOR`, or l of the sign of the other flank) the gap is the pin's normal clearance at the
+disc's theoretical position. Against the exact optimum over centres (the cycloid model's contacts with the disc
+held at 8 rings × 180 directions of centres within the clearance, every fourth angle of the examples' grid), the
+floating rotations of Yao & Liang's reducers (clearance 57.5 µm, modified and unmodified) are within 7.3e-6 rad
+(1.5″) of it, against lost motions of 3–28′. The torque is a pure couple on the disc: the output mechanism (pins in
+the disc's holes) is not modelled.
 
 Loaded pairs are the pins that carry force under the small load (force above `FORCE_FLOOR` of the load's scale):
 pins in contact in the rigid limit, with no deformation budget (unlike the cycloid model's loaded pairs, which
@@ -64,6 +64,7 @@ from ..core.precision import require_x64
 from ..core.solution import RESULTS
 from ..core.units import MM_PER_UM, TWO_PI
 from ..core.validate import as_float
+from .cycloid_pin_contact import normal_clearance, pin_layout
 from .cycloid_pin_geometry import CycloidErrors, checked_errors
 from .rv_khv_contacts import single_disc_system
 from .rv_khv_equilibrium import solve
@@ -71,6 +72,8 @@ from .rv_khv_equilibrium import solve
 if TYPE_CHECKING:
     from .cycloid_pin import CycloidPin
 
+#: A pin whose lever arm about the disc centre is below this sits at the bottom of its tooth space, mm.
+LEVER_FLOOR = 1.0
 #: The small load of every solve: the disc's rotation it would cause on one pin at the pin circle, mm.
 DEFLECTION_MM = 1e-7
 #: A pin carries load where its force exceeds this fraction of the load (stiffness × `DEFLECTION_MM`).
@@ -106,6 +109,19 @@ class FloatingEquilibrium(eqx.Module):
     clearance: Float[Array, ""]
 
 
+def _system(drive: CycloidPin, err: CycloidErrors, theta, clearance_mm, sign):
+    """`single_disc_system`, with the gap of a pin at the bottom of a tooth space taken along its normal.
+
+    There the lever arm l vanishes (and its sign, from the pin's actual position, may disagree with the flank the
+    cycloid model pairs the pin with), so the equivalent error −l Δθ loses the gap; `normal_clearance` at the disc's
+    theoretical position gives it: e = −gap for pins with |l| < `LEVER_FLOOR` or l of the wrong sign."""
+    s = single_disc_system(drive, err, theta, clearance_mm=clearance_mm, deflection_mm=DEFLECTION_MM, load_sign=sign)
+    lever = s.G[:, 2] * drive.pin_circle_radius
+    bottom = (s.k > 0) & ((jnp.abs(lever) < LEVER_FLOOR) | (lever * pin_layout(drive, err, theta).side < 0))
+    gap = normal_clearance(drive, err, theta)
+    return eqx.tree_at(lambda s: s.e, s, jnp.where(bottom, -gap, s.e))
+
+
 def _floating(drive: CycloidPin, err: CycloidErrors, thetas, clearance_mm) -> FloatingEquilibrium:
     L = drive.pin_circle_radius
     # The free centre replaces the fixed disc offset; everything else stays in the pin layout.
@@ -117,7 +133,7 @@ def _floating(drive: CycloidPin, err: CycloidErrors, thetas, clearance_mm) -> Fl
 
     def direction(sign):
         def step(q0, theta):
-            s = single_disc_system(drive, err0, theta, clearance_mm=clearance_mm, deflection_mm=DEFLECTION_MM, load_sign=sign)
+            s = _system(drive, err0, theta, clearance_mm, sign)
             eq = solve(s, q0)
             pen = jnp.max(jnp.where(s.k > 0, s.G @ eq.q_rigid + s.e, -jnp.inf))
             return eq.q, (eq.q_rigid, eq.force, pen > PRELOAD_MM, eq.result, eq.steps)
