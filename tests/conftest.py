@@ -34,6 +34,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 GROUPS = {
     "test_cycloid": "cycloid",
     "test_cycloid_grinding": "cycloid",
+    "test_cycloid_floating": "cycloid",
     "test_harmonic": "harmonic",
     "test_harmonic_tooth_mesh": "harmonic",
     "test_allocation": "planetary_optimise",
