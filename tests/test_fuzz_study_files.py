@@ -164,6 +164,25 @@ def test_fuzzed_study_files_are_accepted_or_refused_naming_file_table_and_key(ba
     fuzz()
 
 
+# Counts that size arrays, each at 2³¹ (a value the fuzzing draws): refused by a message naming the key, before any
+# array or list of that length is made (each of these once exhausted memory instead: a 16 GiB table of pin-space
+# errors, a list of 2³² planet angles, a 32 GiB design matrix).
+OVERSIZED_COUNTS = [
+    ("cycloid_yao2001_modified", ("drive", "z_lobes"), "z_lobes"),
+    ("planetary_wang2013_budget", ("drive", "n_planets"), "n_planets"),
+    ("planetary_wang2013_doe", ("doe", "design", "center_points"), "center_points"),
+]
+
+
+@pytest.mark.parametrize("stem,path,key", OVERSIZED_COUNTS, ids=[k for _, _, k in OVERSIZED_COUNTS])
+def test_oversized_counts_are_refused_naming_the_key(stem, path, key, monkeypatch):
+    raw = read_toml(ROOT / "examples" / f"{stem}.toml")
+    _at(raw, path[:-1])[path[-1]] = 2**31
+    monkeypatch.setattr(config, "read_toml", lambda p: raw)
+    with pytest.raises(ConfigError, match=key):
+        load_study(NAME)
+
+
 # A few mutated files through the real command: exit status 2, one message, no traceback, nothing written.
 CLI_CASES = {
     "a date for a tolerance": ("planetary_wang2013_random", "tolerance_um = 13", "tolerance_um = 2024-01-01"),

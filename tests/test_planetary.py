@@ -219,6 +219,8 @@ def test_profile_shifted_working_angles():
         (dict(z_sun=12, z_planet=36, z_ring=85), "z_ring = z_sun"),
         (dict(z_sun=13, z_planet=36, z_ring=85, n_planets=3), "cannot be assembled"),
         (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=6), "clash"),
+        # a count that sizes lists is refused by the clash bound before any list of n angles is made
+        (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=2**32 - 1), "at most 3 fit"),
         (dict(z_sun=12.5, z_planet=36, z_ring=84), "whole number"),
         (dict(z_sun=0, z_planet=36, z_ring=84), "z_sun"),
         (dict(z_sun=12, z_planet=36, z_ring=84, module=float("nan")), "module"),

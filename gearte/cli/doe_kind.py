@@ -45,6 +45,8 @@ if TYPE_CHECKING:
     from .config import Study
 
 DESIGNS = ("ccd", "box_behnken", "full_factorial", "latin_hypercube", "sobol")
+#: Most centre points a design may repeat (replicates of the centre estimate pure error; more add nothing but runs).
+MAX_CENTER_POINTS = 1000
 CCD_KINDS = {"circumscribed": Circumscribed, "inscribed": Inscribed, "face_centred": FaceCentred}
 #: The keys of ``[doe.design]`` and the design types each belongs to.
 DESIGN_KEYS = {
@@ -125,11 +127,11 @@ def _design_of(dt: Table, kind: str, n_vars: int, seed: int) -> AbstractDesign:
         if isinstance(ccd_kind, FaceCentred) and a not in ("rotatable", 1, 1.0):
             raise ConfigError(f"{dt.where} alpha: a face-centred design has α = 1; remove alpha")
         alpha = None if a == "rotatable" or isinstance(ccd_kind, FaceCentred) else float(a)
-        return CentralComposite(ccd_kind, alpha=alpha, center_points=dt.integer("center_points", 1, minimum=1))
+        return CentralComposite(ccd_kind, alpha=alpha, center_points=dt.integer("center_points", 1, minimum=1, maximum=MAX_CENTER_POINTS))
     if kind == "box_behnken":
         if not 3 <= n_vars <= 7:
             raise ConfigError(f'{dt.where} type: a Box-Behnken design needs 3 to 7 variables, got {n_vars}; use "ccd"')
-        return BoxBehnken(center_points=dt.integer("center_points", 3, minimum=1))
+        return BoxBehnken(center_points=dt.integer("center_points", 3, minimum=1, maximum=MAX_CENTER_POINTS))
     if kind == "full_factorial":
         levels = dt.integer("levels", 3, minimum=3)
         if levels**n_vars > 100_000:

@@ -56,7 +56,7 @@ class Table:
             )
         return v
 
-    def integer(self, key: str, default: Any = _MISSING, *, minimum: int | None = None) -> int:
+    def integer(self, key: str, default: Any = _MISSING, *, minimum: int | None = None, maximum: int | None = None) -> int:
         v = self.get(key, default)
         if v is default and default is not _MISSING:
             return v
@@ -64,6 +64,8 @@ class Table:
             self._fail(key, f"expected a whole number, got {v!r}")
         if minimum is not None and v < minimum:
             self._fail(key, f"must be ≥ {minimum}, got {v}")
+        if maximum is not None and v > maximum:
+            self._fail(key, f"must be ≤ {maximum}, got {v}")
         return v
 
     def number(self, key: str, default: Any = _MISSING, *, minimum: float | None = None, positive: bool = False) -> float:

@@ -89,7 +89,9 @@ def drive_arguments(t: Table) -> dict[str, Any]:
         )
         m.finish()
     kw["analysis"] = _analysis(t, zb)
-    counts = {"space": (zl if zl is not None else zb - 1), "pin": zb}
+    # z_b − 1 spaces whatever z_lobes says (the constructor refuses z_lobes ≠ z_b − 1, naming both); sizing the
+    # per-space tables by an unchecked z_lobes would let a wrong count exhaust memory before that message.
+    counts = {"space": zb - 1, "pin": zb}
     kw["reference"], given = reference_errors(_sub(t, "reference"), counts, PROCESSES[process])
     kw["reference_record"] = json.dumps(given)
     return kw

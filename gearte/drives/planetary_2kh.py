@@ -151,6 +151,16 @@ class Planetary2KH(AbstractSinusoidalDrive):
             if not (0 < cw < 1 and 0 < cn < 1):
                 raise ValueError(f"centre_distance: {a} mm gives no valid working pressure angle for these tooth counts and module")
             aw, an = math.acos(cw), math.acos(cn)
+        # Neighbouring planets must not clash (tip circles, standard addendum = m): at most n_fit planets fit around
+        # the sun, the most whose smallest gap 2π/n keeps 2 a sin(π/n) > m (z_p + 2). Checked before any list of
+        # n angles is made (a count of 2³² would otherwise exhaust memory before the check below could refuse it).
+        x = m * (zp + 2) / (2 * a)
+        n_fit = 1 if x >= 1 else max(1, math.ceil(math.pi / math.asin(x)) - 1)
+        if n > n_fit:
+            raise ValueError(
+                f"n_planets: {n} planets clash: planets of {zp} teeth do not fit around a {zs}-tooth sun that many times "
+                f"(planet tip circles overlap); at most {n_fit} fit"
+            )
         if planet_angles is None:
             angles = [2 * math.pi * i / n for i in range(n)]
         else:
