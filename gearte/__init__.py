@@ -72,6 +72,7 @@ if TYPE_CHECKING:
         Planetary2KH as Planetary2KH,
         SourceSpec as SourceSpec,
     )
+    from .drives.rv_khv import RVKHV as RVKHV, RVResponse as RVResponse
     from .drives.helical import DynamicResponse as DynamicResponse, HelicalPlanetary as HelicalPlanetary, load_helical as load_helical
     from .drives.helical_geometry import HelicalStage as HelicalStage
     from .drives.helical_modifications import (
@@ -96,6 +97,7 @@ if TYPE_CHECKING:
         synthetic_record as synthetic_record,
         write_record as write_record,
     )
+    from .optimise.rv_assembly import AssemblyPhases as AssemblyPhases, best_planet_assembly as best_planet_assembly
     from .optimise.allocation import (
         RuleAllocation as RuleAllocation,
         RuleProblem as RuleProblem,
@@ -260,6 +262,8 @@ _LAZY: dict[str, str] = {
     "SourceSpec": ".drives",
     "DynamicResponse": ".drives.helical",
     "HelicalPlanetary": ".drives.helical",
+    "RVKHV": ".drives.rv_khv",
+    "RVResponse": ".drives.rv_khv",
     "load_helical": ".drives.helical",
     "HelicalStage": ".drives.helical_geometry",
     "StageModifications": ".drives.helical_modifications",
@@ -280,6 +284,8 @@ _LAZY: dict[str, str] = {
     "reassemble": ".identification",
     "synthetic_record": ".identification",
     "write_record": ".identification",
+    "AssemblyPhases": ".optimise.rv_assembly",
+    "best_planet_assembly": ".optimise.rv_assembly",
     "RuleAllocation": ".optimise.allocation",
     "RuleProblem": ".optimise.allocation",
     "allocate_rule": ".optimise.allocation",
@@ -367,6 +373,7 @@ _LAZY: dict[str, str] = {
 __all__ = [
     "RESULTS",
     "RMS",
+    "RVKHV",
     "AbstractCCDKind",
     "AbstractCostModel",
     "AbstractDesign",
@@ -378,6 +385,7 @@ __all__ = [
     "AbstractSinusoidalDrive",
     "AbstractStatistic",
     "AbstractValueLaw",
+    "AssemblyPhases",
     "BatchAssembly",
     "BoxBehnken",
     "BudgetProblem",
@@ -433,6 +441,7 @@ __all__ = [
     "PeriodicSolver",
     "Planetary2KH",
     "Power",
+    "RVResponse",
     "Rayleigh",
     "Reciprocal",
     "ReciprocalSquare",
@@ -470,6 +479,7 @@ __all__ = [
     "as_key",
     "assemble_batch",
     "band_envelope",
+    "best_planet_assembly",
     "budget_problem",
     "contributions",
     "default_cache_dir",

@@ -34,6 +34,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 GROUPS = {
     "test_cycloid": "cycloid",
     "test_cycloid_grinding": "cycloid",
+    "test_cycloid_floating": "cycloid",
     "test_harmonic": "harmonic",
     "test_harmonic_tooth_mesh": "harmonic",
     "test_allocation": "planetary_optimise",
@@ -50,6 +51,8 @@ GROUPS = {
     "test_doe_cli": "doe",
     "test_helical": "helical",
     "test_helical_modification": "helical",
+    "test_rv": "rv",
+    "test_rv_outputs": "rv",
 }
 #: Notebook → the group of the tests of its subject (unlisted notebooks: group "notebooks").
 NOTEBOOK_GROUPS = {
@@ -67,6 +70,7 @@ COST_S = {
     "identification": 120,
     "harmonic": 130,
     "helical": 130,
+    "rv": 120,
     "test_contract": 105,
     "doe": 45,
     "planetary": 75,

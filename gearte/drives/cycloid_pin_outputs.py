@@ -27,8 +27,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from ..core.solution import is_successful
 from ..core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD
 from .cycloid_pin_contact import _analyse, clearances, loaded_pairs, pitch_angles, revolution_angles, sweep, theoretical_pairs
+from .cycloid_pin_floating import floating_equilibrium
 from .cycloid_pin_geometry import YAO_LIANG_J, checked_errors, paper_pin, paper_position, paper_tooth
 from .cycloid_pin_metrics import LoadedPairs, LostMotion, RotationErrorPeakToPeak, floating_disc, floating_loaded_pairs, sensitivities
 from .cycloid_pin_report import report
@@ -71,7 +73,9 @@ ASSUMPTIONS = {
     "the pin number + 1; n: their pin and tooth numbers with J = 6 (gearte pin j is their pin j + 1 + J, gearte tooth "
     "space s their tooth J + 1 − s, mod z)",
     "disc_centre": "the disc centre is held at the given offset from the eccentric (rigid, as in Yao & Liang 2001); "
-    "`disc_centre` also reports the disc free to float within a circle of that radius",
+    "`disc_centre` also reports the disc free to float within a circle of that radius, and `floating_equilibrium` that "
+    "floating disc solved as the minimum of the contact potential (pins as unilateral springs, rigid limit; the pin "
+    "wheel stays at its offset Δ_2)",
 }
 
 
@@ -252,6 +256,7 @@ def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
         "lost_motion_at_input_angle_arcmin": float(at.lost_motion) * ARCMIN_PER_RAD,
         "interference": bool(lm.min() < 0),
         "disc_centre": _disc_centre(centre) | {"loaded_pairs_floating": floating_loaded_pairs(d, err, theta0)},
+        "floating_equilibrium": floating_summary(d, err),
         "rotation_error_p2p_arcsec": float(te_f.max() - te_f.min()),
         "rotation_error_reverse_p2p_arcsec": float(te_r.max() - te_r.min()),
         "rotation_error_at_input_angle_arcsec": float(at.rotation_error) * ARCSEC_PER_RAD,
@@ -280,6 +285,26 @@ def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
         "n_loaded": n_loaded,
     }
     return summary, curves
+
+
+def floating_summary(drive: CycloidPin, err) -> dict:
+    """The disc floating in its turning-arm bearing (clearance: the given Δ_1) on the drive's grid, at the minimum of
+    the contact potential (`gearte.drives.cycloid_pin_floating`), beside the rigid disc held at the fixed offsets."""
+    fe = floating_equilibrium(drive, err)
+    rigid = np.asarray(drive.response(err).lost_motion)
+    lm = np.asarray(fe.lost_motion) * ARCMIN_PER_RAD
+    n, steps = np.asarray(fe.loaded_pairs), np.asarray(fe.steps)
+    return {
+        "clearance_um": float(fe.clearance),
+        "positions": int(lm.size),
+        "lost_motion_arcmin": {"min": float(lm.min()), "max": float(lm.max())},
+        "loaded_pairs_forward": {"min": int(n[0].min()), "max": int(n[0].max())},
+        "loaded_pairs_reverse": {"min": int(n[1].min()), "max": int(n[1].max())},
+        "interfering_share_rigid": float(np.mean(rigid < 0)),
+        "interfering_share_floating": float(np.mean(np.any(np.asarray(fe.preloaded), axis=0))),
+        "all_solves_successful": is_successful(fe.result),
+        "newton_steps": {"max": int(steps.max()), "mean": float(steps.mean())},
+    }
 
 
 def _disc_centre(c: dict) -> dict:

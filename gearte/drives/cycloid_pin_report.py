@@ -16,6 +16,27 @@ def _fmt(x, spec=".3f") -> str:
     return "—" if x is None else format(x, spec)
 
 
+def _floating_line(f: dict) -> str:
+    """The floating disc's bullet: what it does where the rigid, fixed-offset disc interferes."""
+    lm, nf, nr = f["lost_motion_arcmin"], f["loaded_pairs_forward"], f["loaded_pairs_reverse"]
+    numbers = (
+        f"lost motion {lm['min']:.2f}′ … {lm['max']:.2f}′ and {nf['min']}–{nf['max']} loaded pairs forward, "
+        f"{nr['min']}–{nr['max']} reverse (pins carrying force at vanishing load)"
+    )
+    head = (
+        f"- the disc floating in its bearing clearance ({f['clearance_um']:.1f} µm; the contact potential's minimum, "
+        f"pins as unilateral springs, rigid limit, on the grid of {f['positions']} input angles): "
+    )
+    if f["interfering_share_rigid"] > 0 and f["interfering_share_floating"] == 0:
+        return (
+            head + f"the rigid fixed-offset idealisation interferes over {100 * f['interfering_share_rigid']:.0f} % of "
+            f"the grid, the floating disc nowhere: {numbers};"
+        )
+    if f["interfering_share_floating"] > 0:
+        return head + f"it jams (contacts preloaded) at {100 * f['interfering_share_floating']:.0f} % of the grid; {numbers};"
+    return head + numbers + ";"
+
+
 def report(drive: CycloidPin, s: dict) -> list[str]:
     """The report sections of the reference reducer and of the Monte Carlo (Markdown lines)."""
     L = [
@@ -47,6 +68,7 @@ def report(drive: CycloidPin, s: dict) -> list[str]:
             if s["interference"] and s["disc_centre"]["loaded_pairs_floating"]["min"] is not None
             else ""
         ),
+        _floating_line(s["floating_equilibrium"]),
         f"- rotation error (TE) of the stage, forward load: peak-to-peak **{s['rotation_error_p2p_arcsec']:.2f}″** over "
         f"{drive.analysis.sweep_revolutions} input revolution(s) (reverse load {s['rotation_error_reverse_p2p_arcsec']:.2f}″).",
         "",

@@ -7,6 +7,7 @@ from .explicit import ExplicitDrive
 from .harmonic import HarmonicDrive
 from .planetary_2kh import Planetary2KH
 from .protocol import AbstractDrive
+from .rv_khv import RVKHV
 
 DRIVES: dict[str, type[AbstractDrive]] = {
     cls.type_name: cls
@@ -15,5 +16,6 @@ DRIVES: dict[str, type[AbstractDrive]] = {
         ExplicitDrive,
         HarmonicDrive,
         CycloidPin,
+        RVKHV,
     )
 }

@@ -1,0 +1,280 @@
+"""Equilibrium of rigid bodies on unilateral springs and clearance bearings: the contact potential's minimum.
+
+Hidaka et al. (1994) model every part of a K-H-V (RV) reducer as a rigid body in the plane and
+every contact as a spring along its line of action carrying an *equivalent error*. gearte
+writes each contact as a linear function of the parts' small displacements q (mm; rotations
+as arcs at a reference length L, so every coordinate is a length):
+
+- a **unilateral contact** (a tooth pair, a pin on its flank) has penetration p = g·q + e, with
+  e its equivalent error (mm, > 0: interference, < 0: a gap) and force k·max(0, p);
+- a **bearing** with radial clearance c has a relative displacement r = B q + e_b (a plane vector,
+  mm). Without clearance (c = 0) it is a plain spring, force k r. With a clearance its dead zone is
+  the regular polygon of `BEARING_FACES` faces tangent to the circle of radius c: each face f (unit
+  outward normal n_f) is a unilateral contact of penetration n_f·r − c and stiffness k. The
+  polygon lies outside the circle by at most c (sec(π/M) − 1) (1.2e-3 c for M = 64: 6 nm for a
+  5 µm clearance) and makes the whole potential piecewise quadratic.
+
+With a generalised load f (a small torque on the output) the equilibrium is the minimum of the
+convex potential
+
+    Φ(q) = Σ ½ k max(0, g·q + e)² + Σ_bearings Σ_f ½ k_b max(0, n_f·(B q + e_b) − c)² + ½ μ |q|² − f·q
+
+(½ k_b |B q + e_b|² for a bearing without clearance), where the tiny μ makes the minimiser
+unique. `solve` takes it proximal to the starting point, ½ μ |q − q₀|², so a part left floating
+inside its clearances, held by no contact, stays where the start put it (the neighbouring solution
+along the grid) instead of being pulled back to nominal across every contact in its way; μ moves
+nothing that a contact holds (it adds μ|q − q₀| ≈ 1e-15 of the stiffness × mm to the forces).
+`solve` minimises Φ by Newton's method with an exact line search: φ′(t) along a Newton direction is
+piecewise linear and increasing, so the search walks from kink to kink (a contact or a bearing face
+that opens or closes) to the piece that holds its root. As Φ is piecewise quadratic, the iteration ends
+in finitely many steps: once the set of closed contacts is found the full Newton step lands on the
+minimum, and the iteration stops when the force residual is at rounding level relative to the
+largest force in the system (the load, or the contact forces where the errors preload the parts).
+The result code is reported per solve.
+
+**Rigid limit.** For a fixed set of closed contacts the minimiser is affine in the load,
+q(f) = q₀ + H⁻¹ f (H the Hessian there), so the rigid-body position is q₀ = q − H⁻¹ f: one more
+back-substitution with the Hessian already factorised, exactly independent of the load and of a
+common scale of the stiffnesses while the set of closed contacts stays the same (tested to 1e-9).
+Where several load paths share the torque (hyperstatic), the ratios of the stiffnesses decide the
+sharing: they are inputs of the model.
+
+**Gradients** are those of the implicit-function theorem: the iteration runs on stopped
+gradients, and one Newton step from the solution with the Hessian held carries the derivative
+−H⁻¹ ∂(∇Φ)/∂θ (no iteration is differentiated).
+
+Units: mm (forces in units of the stiffness, which is normalised), rad inside the callers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..core.solution import RESULTS
+
+#: Faces of the polygon that stands for a bearing's clearance circle.
+BEARING_FACES = 64
+#: Largest number of Newton iterations; a solve that needs more reports `RESULTS.nonlinear_max_steps_reached`.
+MAX_STEPS = 200
+#: A force residual below this many machine epsilons of the largest term it is computed from is at rounding level.
+ROUNDING_FACTOR = 64.0
+#: Sufficient decrease (Armijo) for taking the full Newton step without a line search.
+ARMIJO = 1e-4
+#: Largest number of kinks the exact line search crosses along one Newton direction.
+LINE_SEARCH_STEPS = 64
+
+_ANGLES = 2 * math.pi * np.arange(BEARING_FACES) / BEARING_FACES
+#: Unit outward normals of the faces (M × 2).
+FACE_NORMALS = np.stack([np.cos(_ANGLES), np.sin(_ANGLES)], axis=1)
+
+
+class ContactSystem(eqx.Module):
+    """The contacts of one configuration (one input angle), linear in the small displacements q (n coordinates, mm).
+
+    - `G`, `e`, `k`: unilateral contacts: penetration `G @ q + e` (m × n, mm), stiffness (m,; 0 leaves a contact out).
+    - `B`, `eb`, `c`, `kb`: bearings: relative displacement `B @ q + eb` (b × 2 × n, mm), clearance (b,, mm ≥ 0),
+      stiffness (b,).
+    - `f`: the generalised load (n,), in units of stiffness × mm.
+    - `mu`: the regularisation of floating parts (units of stiffness).
+    """
+
+    G: Float[Array, "m n"]
+    e: Float[Array, " m"]
+    k: Float[Array, " m"]
+    B: Float[Array, "b 2 n"]
+    eb: Float[Array, "b 2"]
+    c: Float[Array, " b"]
+    kb: Float[Array, " b"]
+    f: Float[Array, " n"]
+    mu: Float[Array, ""]
+
+
+class Equilibrium(eqx.Module):
+    """The minimum of the contact potential.
+
+    - `q`: the displacements under the load (mm); `q_rigid`: the rigid-limit displacements (mm).
+    - `force`: force in every unilateral contact (units of stiffness × mm; > 0: closed, carrying load).
+    - `bearing_force`: magnitude of the force in every bearing.
+    - `result`: a `RESULTS` item; `steps`: Newton iterations.
+    """
+
+    q: Float[Array, " n"]
+    q_rigid: Float[Array, " n"]
+    force: Float[Array, " m"]
+    bearing_force: Float[Array, " b"]
+    result: RESULTS
+    steps: Array
+
+
+def _normals(dtype):
+    return jnp.asarray(FACE_NORMALS, dtype=dtype)
+
+
+def _bearing_local(s: ContactSystem, r):
+    """Energy (b,), force vector (b × 2) and stiffness (b × 2 × 2) of every bearing at relative displacement r."""
+    N = _normals(r.dtype)
+    P = r @ N.T - s.c[:, None]  # face penetrations (b × M)
+    pos = jnp.maximum(P, 0.0)
+    poly = s.c > 0
+    energy = 0.5 * s.kb * jnp.where(poly, jnp.sum(pos * pos, axis=-1), jnp.sum(r * r, axis=-1))
+    force = s.kb[:, None] * jnp.where(poly[:, None], pos @ N, r)
+    act = (P > 0).astype(r.dtype)
+    K_poly = jnp.einsum("bf,fi,fj->bij", act, N, N)
+    K = s.kb[:, None, None] * jnp.where(poly[:, None, None], K_poly, jnp.eye(2, dtype=r.dtype))
+    return energy, force, K
+
+
+def _relative(s: ContactSystem, q):
+    return jnp.einsum("bin,n->bi", s.B, q) + s.eb
+
+
+def potential(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, ""]:
+    """Φ(q) (module notes)."""
+    p = jnp.maximum(s.G @ q + s.e, 0.0)
+    energy, _, _ = _bearing_local(s, _relative(s, q))
+    return 0.5 * jnp.sum(s.k * p * p) + jnp.sum(energy) + 0.5 * s.mu * jnp.dot(q, q) - jnp.dot(s.f, q)
+
+
+def gradient(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, " n"]:
+    """∇Φ(q): generalised-force residual."""
+    p = jnp.maximum(s.G @ q + s.e, 0.0)
+    _, force, _ = _bearing_local(s, _relative(s, q))
+    return s.G.T @ (s.k * p) + jnp.einsum("bin,bi->n", s.B, force) + s.mu * q - s.f
+
+
+def hessian(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, "n n"]:
+    """The (generalised) Hessian of Φ at q: closed contacts only (right derivative on a contact's boundary)."""
+    n = q.shape[0]
+    active = (s.G @ q + s.e > 0.0).astype(q.dtype)
+    H = (s.G.T * (s.k * active)) @ s.G
+    _, _, K = _bearing_local(s, _relative(s, q))
+    H = H + jnp.einsum("bim,bij,bjn->mn", s.B, K, s.B)
+    return H + s.mu * jnp.eye(n, dtype=q.dtype)
+
+
+def _line_search(s: ContactSystem, q, dq):
+    """The step t > 0 that minimises Φ(q + t dq), exactly: φ′(t) is piecewise linear and increasing, with a kink
+    wherever a unilateral contact or a bearing face opens or closes. From t = 0 the walk takes the root of φ′ on the
+    piece it stands on if that root lies before the next kink, or moves to that kink; each step crosses one kink
+    (a contact that closes usually stops the walk at once). Out of steps: the last kink reached (φ decreases up to
+    it)."""
+    N = _normals(q.dtype)
+    poly = s.c > 0
+    kb = jnp.where(poly, s.kb, 0.0)
+    ks = jnp.where(poly, 0.0, s.kb)
+    r0, rb = _relative(s, q), jnp.einsum("bin,n->bi", s.B, dq)
+    # Every row as one piece a + t b with stiffness w: the unilateral contacts, then the faces of every bearing.
+    a = jnp.concatenate([s.G @ q + s.e, jnp.ravel(r0 @ N.T - s.c[:, None])])
+    b = jnp.concatenate([s.G @ dq, jnp.ravel(rb @ N.T)])
+    w = jnp.concatenate([s.k, jnp.ravel(jnp.broadcast_to(kb[:, None], (kb.shape[0], N.shape[0])))])
+    # The smooth part: regularisation, load and the bearings without clearance (plain springs).
+    lin0 = s.mu * jnp.dot(q, dq) - jnp.dot(s.f, dq) + jnp.sum(ks * jnp.sum(r0 * rb, axis=-1))
+    lin1 = s.mu * jnp.dot(dq, dq) + jnp.sum(ks * jnp.sum(rb * rb, axis=-1))
+    crossing = (w > 0) & (b != 0)
+    kink = jnp.where(crossing, -a / jnp.where(b != 0, b, 1.0), jnp.inf)
+    zero = jnp.zeros((), dtype=q.dtype)
+
+    def cond(state):
+        _, _, k, done = state
+        return (~done) & (k < LINE_SEARCH_STEPS)
+
+    def body(state):
+        t, _, k, _ = state
+        nxt = jnp.min(jnp.where(kink > t, kink, jnp.inf))
+        mid = jnp.where(jnp.isfinite(nxt), 0.5 * (t + nxt), t + 1.0)
+        p = a + t * b
+        d1 = jnp.sum(w * jnp.maximum(p, 0.0) * b) + lin0 + t * lin1
+        slope = jnp.sum(jnp.where(a + mid * b > 0, w * b * b, 0.0)) + lin1
+        root = t - d1 / slope
+        done = root <= nxt
+        return jnp.where(done, root, nxt), t, k + 1, done
+
+    t, last, _, done = jax.lax.while_loop(cond, body, (zero, zero, jnp.asarray(0), jnp.asarray(False)))
+    del last, done  # out of steps: t is the last kink reached, where φ is still decreasing
+    return t
+
+
+def _rounding_floor(s: ContactSystem, q):
+    """The rounding level of the force residual at q: eps × the largest magnitude it is computed from (the load, the
+    contact terms k (|G||q| + |e|), the bearing terms)."""
+    aq = jnp.abs(q)
+    unilateral = jnp.max(s.k * (jnp.abs(s.G) @ aq + jnp.abs(s.e)), initial=0.0)
+    bearing = jnp.max(s.kb * jnp.max(jnp.einsum("bin,n->bi", jnp.abs(s.B), aq) + jnp.abs(s.eb), axis=-1) + s.kb * s.c, initial=0.0)
+    scale = jnp.maximum(jnp.max(jnp.abs(s.f)), jnp.maximum(unilateral, bearing))
+    return ROUNDING_FACTOR * jnp.finfo(q.dtype).eps * scale
+
+
+def _active(s: ContactSystem, q):
+    """Which unilateral contacts and bearing faces are closed at q."""
+    N = _normals(q.dtype)
+    faces = (_relative(s, q) @ N.T - s.c[:, None] > 0.0) & (s.c > 0)[:, None]  # a bearing without clearance has none
+    return s.G @ q + s.e > 0.0, faces
+
+
+def _newton(s: ContactSystem, q0):
+    """Newton iterations from q0. Stops when the full Newton step was taken and no contact changed state on it (the
+    quadratic model was exact there: the step landed on the minimum), or when the residual is at rounding level."""
+
+    def cond(state):
+        _, _, _, i, done = state
+        return (~done) & (i < MAX_STEPS)
+
+    def body(state):
+        q, g, act, i, _ = state
+        L = jnp.linalg.cholesky(hessian(s, q))
+        dq = -jax.scipy.linalg.cho_solve((L, True), g)
+        # The full step where it decreases Φ enough (Armijo): the whole set of closed contacts may change at once.
+        full = potential(s, q + dq) <= potential(s, q) + ARMIJO * jnp.dot(g, dq)
+        t = jax.lax.cond(full, lambda: jnp.ones((), dtype=q.dtype), lambda: _line_search(s, q, dq))
+        qn = q + t * dq
+        gn = gradient(s, qn)
+        actn = _active(s, qn)
+        same = jnp.all(act[0] == actn[0]) & jnp.all(act[1] == actn[1])
+        done = ((t == 1.0) & same) | (jnp.max(jnp.abs(gn)) <= _rounding_floor(s, qn))
+        return qn, gn, actn, i + 1, done
+
+    g0 = gradient(s, q0)
+    done0 = jnp.max(jnp.abs(g0)) <= _rounding_floor(s, q0)
+    q, _, _, steps, ok = jax.lax.while_loop(cond, body, (q0, g0, _active(s, q0), jnp.asarray(0), done0))
+    return q, ok, steps
+
+
+#: `_newton`, one solve after another under `vmap` (`jax.custom_batching.sequential_vmap`): a batched while loop
+#: would run every solve of a batch for as many iterations as its slowest one. Its inputs carry no derivative (the
+#: implicit-function step in `solve` differentiates), so it needs no derivative rule of its own.
+_newton_each = jax.custom_batching.sequential_vmap(_newton)
+
+
+def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium:
+    """Minimise the contact potential of `s` (see the module notes); differentiable by the implicit-function theorem.
+
+    `q0`: the starting point (default: the nominal position, zero); a neighbouring solution makes a good one.
+
+    **Returns:** an `Equilibrium` (its `result` is `RESULTS.successful` or `RESULTS.nonlinear_max_steps_reached`).
+    """
+    start = jnp.zeros_like(s.f) if q0 is None else jax.lax.stop_gradient(q0)
+    # The regularisation is proximal to the start: ½ μ |q − q0|² (a load μ q0 added), so a part that floats keeps its
+    # position instead of being sent back to nominal across every contact in its way.
+    s = eqx.tree_at(lambda t: t.f, s, s.f + s.mu * start)
+    ss = jax.tree.map(jax.lax.stop_gradient, s)
+    q_star, ok, steps = _newton_each(ss, start)
+    cho = (jax.lax.stop_gradient(jnp.linalg.cholesky(hessian(ss, q_star))), True)
+    # One Newton step with the Hessian held: the value stays, the derivative is the implicit one.
+    q = q_star - jax.scipy.linalg.cho_solve(cho, gradient(s, q_star))
+    # The rigid limit: remove the part of q proportional to the load for the closed contacts.
+    q_rigid = q - jax.scipy.linalg.cho_solve(cho, s.f - s.mu * start)
+    force = s.k * jnp.maximum(s.G @ q + s.e, 0.0)
+    _, bf, _ = _bearing_local(s, _relative(s, q))
+    b2 = jnp.sum(bf * bf, axis=-1)
+    bforce = jnp.where(b2 > 0, jnp.sqrt(jnp.where(b2 > 0, b2, 1.0)), 0.0)
+    result = RESULTS.where(ok, RESULTS.successful, RESULTS.nonlinear_max_steps_reached)  # pyright: ignore[reportArgumentType]
+    return Equilibrium(q, q_rigid, force, bforce, result, steps)
+
+
+__all__ = ("BEARING_FACES", "ContactSystem", "Equilibrium", "gradient", "hessian", "potential", "solve")

@@ -1,0 +1,257 @@
+"""RV (K-H-V) reducer (Hidaka et al. 1994): the equilibrium model against independent references.
+
+References: zero errors; the cycloid-pin geometric model (Yao & Liang 2001) for one disc on one
+central crank; linearity at a fixed contact state; the rigid limit's independence of load and
+stiffness; invariance to turning the whole drive by a pin pitch; the closed-form lost motion
+c (1/max l⁺ + 1/max |l⁻|) of a uniform normal clearance c with the lever arms
+l = a z_c sin φ / S of the cycloid's lines of action; gradients against float64 central differences.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from gearte.core.solution import RESULTS
+from gearte.drives.cycloid_pin import CycloidErrors, CycloidModification, CycloidPin, sweep
+from gearte.drives.protocol import Eccentricity
+from gearte.drives.rv_khv import RVKHV
+from gearte.drives.rv_khv_contacts import single_disc_system
+from gearte.drives.rv_khv_equilibrium import solve
+
+ZP, R, RPIN, A = 20, 50.0, 2.5, 1.5
+POINTS = 24  # output angles of the shared grid
+
+
+def make(**kw) -> RVKHV:
+    base: dict[str, Any] = dict(
+        pin_circle_radius=R, pin_radius=RPIN, eccentricity=A, z_sun=12, z_planet=24, crank_circle_radius=30.0, points=POINTS
+    )
+    base.update(kw)
+    return RVKHV(ZP, **base)
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return make()
+
+
+def arms(theta_T: np.ndarray) -> np.ndarray:
+    """Lever arms a z_c sin φ / S of the pins at input position θ_T (rows), the pin's angle φ from the crank."""
+    K = A * ZP / R
+    phi = np.mod(theta_T[:, None] + 2 * np.pi * np.arange(ZP)[None, :] / ZP + np.pi, 2 * np.pi) - np.pi
+    return A * (ZP - 1) * np.sin(phi) / np.sqrt(1 + K * K - 2 * K * np.cos(phi))
+
+
+def test_zero_errors_give_zero_te_and_lost_motion(drive):
+    r = drive.response(None)
+    assert bool(np.all(np.asarray(r.result == RESULTS.successful)))
+    np.testing.assert_allclose(np.asarray(r.te), 0.0, atol=1e-13)
+    # Under the small load itself the TE is the elastic deflection only: of the order of deflection_mm / R.
+    assert np.max(np.abs(np.asarray(r.te_loaded))) < 10 * float(drive.deflection_mm) / R
+
+
+@eqx.filter_jit
+def _single_disc(stage, err, thetas, clearance):
+    def one(t, s):
+        eq = solve(single_disc_system(stage, err, t, clearance_mm=clearance, load_sign=s))
+        return eq.q_rigid[2] / stage.pin_circle_radius, eq.result
+
+    return jax.vmap(lambda s: jax.vmap(lambda t: one(t, s))(thetas))(jnp.asarray([1.0, -1.0]))
+
+
+STAGE = CycloidPin(ZP, pin_circle_radius=R, pin_radius=RPIN, eccentricity=A)
+# One shape for every single-disc solve (one compiled program): 12 input positions over a pin pitch.
+PITCH_THETAS = np.arange(12) * (2 * np.pi / ZP / 12)
+
+
+def test_one_crank_one_disc_reproduces_the_cycloid_model():
+    """Hidaka's illustration (one disc on one central crank, rigid) against the cycloid-pin geometric model."""
+    rng = np.random.default_rng(3)
+    err = CycloidErrors(
+        pin_radius=-30.0,
+        pin_circle_radius=6.0,
+        pin_tangential=rng.uniform(-8, 8, ZP),
+        pin_radial=rng.uniform(-4, 4, ZP),
+        indexing=rng.uniform(-20, 20, ZP - 1) / 206265,
+        infeed=rng.uniform(-5, 5, ZP - 1),
+        setup_eccentricity=9.0,
+        setup_phase=0.7,
+        dressing_x=2.0,
+        disc_offset=15.0,
+        disc_offset_phase=1.1,
+    )
+    thetas = jnp.asarray(np.arange(12) * (2 * np.pi / 12) + 0.013)  # over a turn of the crank
+    te, res = _single_disc(STAGE, err, thetas, 0.0)
+    assert bool(np.all(np.asarray(res == RESULTS.successful)))
+    ref = sweep(STAGE, err, thetas, normal=False)
+    te = np.asarray(te)
+    # Where the rigid disc fits between the pins (lost motion > 0; elsewhere it interferes and the springs decide).
+    fits = np.asarray(ref.lost_motion) > 0
+    assert fits.all()
+    np.testing.assert_allclose(te[0], np.asarray(ref.rotation_error), rtol=1e-6, atol=0)
+    np.testing.assert_allclose(te[1], np.asarray(ref.reverse_rotation_error), rtol=1e-6, atol=0)
+    np.testing.assert_allclose(te[0] - te[1], np.asarray(ref.lost_motion), rtol=1e-6, atol=0)
+
+
+def test_uniform_profile_clearance_gives_the_backlash_formula():
+    """A uniform normal clearance c (an equidistant modification of the profile): lost motion, max over a pitch,
+    against max over the pitch of c (1/max l⁺ + 1/max |l⁻|), within 0.2 %."""
+    c = 0.010
+    stage = CycloidPin(ZP, pin_circle_radius=R, pin_radius=RPIN, eccentricity=A, modification=CycloidModification(0.0, c, 0.0))
+    te, _ = _single_disc(stage, CycloidErrors(), jnp.asarray(PITCH_THETAS), 0.0)
+    lm = np.max(np.asarray(te[0] - te[1]))
+    lev = arms(PITCH_THETAS)
+    ref = np.max(c * (1 / np.max(np.where(lev > 0, lev, 0), axis=1) + 1 / np.max(np.where(lev < 0, -lev, 0), axis=1)))
+    assert lm == pytest.approx(ref, rel=2e-3)
+
+
+def test_pin_radius_error_gives_the_closed_form_lost_motion(drive):
+    """The whole drive (3 cranks, 2 discs, rigid bearings, no backlash) with undersize pins, Δr′ = −c.
+
+    With the input held, an output rotation θ_o turns the discs by θ_o and rolls each planet on the sun, turning the
+    cranks by θ_o r_c / r_g, which moves the discs by a θ_o r_c / r_g across the eccentric. As the disc's conjugate
+    motion leaves every pin gap unchanged, that translation changes pin j's gap as a disc rotation l_j/z_c per unit
+    crank turn would: the gap closes at the rate l_j (1 + r_c / (z_c r_g)). So the lost motion at each angle is
+    c (1/max l⁺ + 1/max |l⁻|) / (1 + r_c / (z_c r_g)) over both discs' pins."""
+    c_um = 6.0
+    r = drive.response({"pin_radius": -c_um})
+    lm = np.asarray(r.te[0] - r.te[1])
+    th_o = np.asarray(r.output_angle)
+    lev = np.concatenate([arms((ZP - 1) * th_o), arms((ZP - 1) * th_o - np.pi)], axis=1)
+    rc, rg = 30.0, 30.0 * 24 / 36  # crank circle; planet pitch radius r_c z_g / (z_s + z_g)
+    ref = 1e-3 * c_um * (1 / np.max(np.where(lev > 0, lev, 0), axis=1) + 1 / np.max(np.where(lev < 0, -lev, 0), axis=1))
+    np.testing.assert_allclose(lm, ref / (1 + rc / ((ZP - 1) * rg)), rtol=2e-3)
+
+
+ERRS = {
+    "carrier_hole": Eccentricity(np.asarray([4.0, 2.0, 3.0]), np.asarray([0.3, 2.0, 4.0])),
+    "disc_hole": Eccentricity(np.asarray([3.0, 1.0, 2.0, 2.5, 1.5, 0.5]), np.asarray([0.1, 1.0, 2.0, 3.0, 4.0, 5.0])),
+    "crank_eccentricity": jnp.asarray([3.0, -2.0, 1.0]),
+    "crank_phase": jnp.asarray([1e-4, -2e-4, 0.5e-4]),
+    "planet_eccentricity": Eccentricity(np.asarray([5.0, 3.0, 4.0]), np.asarray([0.0, 2.0, 4.0])),
+    "sun_eccentricity": Eccentricity(6.0, 1.0),
+    "backlash": 8.0,
+}
+
+
+def _scaled(s):
+    out = {}
+    for k, v in ERRS.items():
+        out[k] = Eccentricity(np.asarray(v.magnitude) * s, v.phase) if isinstance(v, Eccentricity) else jnp.asarray(v) * s
+    return out
+
+
+def test_te_is_linear_in_small_errors_at_a_fixed_contact_state(drive):
+    """Doubling every (bearing, crank, gear) error doubles the rigid TE wherever the same contacts carry load."""
+    r1, r2 = drive.response(_scaled(1.0)), drive.response(_scaled(2.0))
+    same = np.all((np.asarray(r1.force) > 0) == (np.asarray(r2.force) > 0), axis=-1)
+    assert same.mean() > 0.5
+    te1, te2 = np.asarray(r1.te), np.asarray(r2.te)
+    np.testing.assert_allclose(te2[same], 2 * te1[same], rtol=1e-8, atol=1e-15)
+    assert np.max(np.abs(te1)) > 1e-5  # the errors move the output by arc seconds
+
+
+def test_rigid_limit_does_not_depend_on_load_or_stiffness(drive):
+    """With a backlash and pin clearances (unilateral contacts), the rigid-limit TE is the same for any small load and
+    any common scale of the stiffnesses; the loaded TE converges to it linearly in the load."""
+    drive = eqx.tree_at(lambda d: d.backlash_mm, drive, jnp.asarray(0.02, dtype=float))
+    base = drive.response(_scaled(1.0))
+    errs = dict(_scaled(1.0), pin_radius=jnp.asarray(-8.0))
+    base = drive.response(errs)
+    for kw in (dict(deflection_mm=1e-8), dict(deflection_mm=1e-6), dict(pin_stiffness=30.0, mesh_stiffness=30.0, bearing_stiffness=30.0)):
+        other = eqx.tree_at(lambda d, kw=kw: [getattr(d, k) for k in kw], drive, [jnp.asarray(v, dtype=float) for v in kw.values()])
+        r = other.response(errs)
+        np.testing.assert_allclose(np.asarray(r.te), np.asarray(base.te), rtol=1e-9, atol=1e-14)
+    # The loaded TE converges to the rigid one linearly in the load: 10× less load, 10× less deflection.
+    devs = []
+    for defl in (1e-6, 1e-7):
+        r = eqx.tree_at(lambda d: d.deflection_mm, drive, jnp.asarray(defl, dtype=float)).response(errs)
+        devs.append(np.max(np.abs(np.asarray(r.te_loaded - r.te))))
+    assert devs[0] / devs[1] == pytest.approx(10.0, rel=1e-3)
+
+
+def test_turning_the_whole_drive_by_a_pin_pitch_gives_the_same_te(drive):
+    """Pins are at fixed angles, so the drive can be turned onto itself by k pin pitches γ: the per-pin errors move k
+    places, housing-fixed phases turn by γ, the sun's by γ − i γ (it turns i γ as the carrier turns γ)."""
+    k = 3
+    gamma = 2 * np.pi * k / ZP
+    errs = dict(_scaled(1.0))
+    rng = np.random.default_rng(1)
+    errs["pin_tangential"] = jnp.asarray(rng.uniform(-5, 5, ZP))
+    errs["pin_circle_eccentricity"] = Eccentricity(4.0, 0.4)
+    turned = dict(errs)
+    turned["pin_tangential"] = jnp.roll(errs["pin_tangential"], k)
+    turned["pin_circle_eccentricity"] = Eccentricity(4.0, 0.4 + gamma)
+    se = errs["sun_eccentricity"]
+    turned["sun_eccentricity"] = Eccentricity(se.magnitude, se.phase + gamma - drive.ratio * gamma)
+    th = np.asarray(drive.output_angles())
+    a = drive.solve_at(errs, th)
+    b = drive.solve_at(turned, th + gamma)
+    np.testing.assert_allclose(np.asarray(b.te), np.asarray(a.te), rtol=1e-9, atol=1e-13)
+
+
+def test_gradients_match_finite_differences(drive):
+    """d(lost motion)/d(tolerance) by the implicit-function theorem against float64 central differences."""
+
+    def lm(x):
+        e = dict(_scaled(1.0))
+        e["carrier_hole"] = Eccentricity(jnp.asarray([4.0, 2.0, 3.0]) * x[0], e["carrier_hole"].phase)
+        e["pin_radius"] = -3.0 * x[1]
+        e["crank_eccentricity"] = jnp.asarray([3.0, -2.0, 1.0]) * x[2]
+        r = drive.response(e)  # the grid's program, shared with the other tests
+        return jnp.sum(r.te[0] - r.te[1]) + jnp.sum(r.te[0])
+
+    x0 = jnp.asarray([1.0, 1.0, 1.0])
+    g = np.asarray(jax.jacfwd(lm)(x0))  # forward mode through the implicit step: a smaller program to compile than reverse
+    h = 1e-5
+    for i in range(3):
+        e = jnp.zeros(3).at[i].set(h)
+        fd = (float(lm(x0 + e)) - float(lm(x0 - e))) / (2 * h)
+        assert g[i] == pytest.approx(fd, rel=1e-5, abs=1e-12), i
+    assert np.all(np.isfinite(g)) and np.any(np.abs(g) > 0)
+
+
+def test_the_rigid_limit_of_the_solver_is_exact_for_the_closed_contacts():
+    """The rigid-limit position satisfies the closed contacts with zero penetration (to rounding)."""
+    err = CycloidErrors(pin_radius=-5.0, pin_tangential=np.linspace(-3, 3, ZP))
+    s = single_disc_system(STAGE, err, 0.1, load_sign=1.0)
+    eq = eqx.filter_jit(solve)(s)
+    closed = np.asarray(eq.force) > 0
+    p = np.asarray(s.G @ eq.q_rigid + s.e)
+    assert closed.any()
+    np.testing.assert_allclose(p[closed], 0.0, atol=1e-13)
+    assert math.isfinite(float(eq.q_rigid[2]))
+
+
+def test_best_planet_assembly_is_a_coordinate_optimum_of_the_units_te():
+    """The search's positions: no single planet's other position gives a smaller TE p-p (each checked through the
+    drive's own response, not the search's batched one), the value is that of the drive at those positions, and
+    it is not above the start's."""
+    from gearte.optimise.rv_assembly import best_planet_assembly
+
+    d = make(z_sun=12, z_planet=12, points=16)
+    run_out = Eccentricity(jnp.asarray([12.0, 8.0, 10.0]), jnp.asarray([0.3, 2.0, 4.1]))
+    errors = {"planet_eccentricity": run_out, "sun_eccentricity": Eccentricity(jnp.asarray([6.0]), jnp.asarray([1.0]))}
+    out = best_planet_assembly(d, errors, metric="peak_to_peak")
+    assert bool(out.result == RESULTS.successful)
+    teeth = np.asarray(out.teeth)
+    metric = d.metrics["peak_to_peak"]
+
+    def pp(k):
+        return float(metric(d, d.response(dict(errors, planet_assembly=2 * np.pi * np.asarray(k, dtype=float) / d.z_planet))))
+
+    assert float(out.value) == pytest.approx(pp(teeth), rel=1e-9)
+    assert float(out.value) <= float(out.start) + 1e-15
+    assert float(out.start) == pytest.approx(pp([0, 0, 0]), rel=1e-9)
+    for i in range(d.cranks):
+        for k in range(d.z_planet):
+            other = teeth.copy()
+            other[i] = k
+            assert pp(other) >= float(out.value) * (1 - 1e-9), (i, k)
