@@ -42,6 +42,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_scaleout.py
 	$(BIN)/python benchmarks/bench_grid_drives.py
 	$(BIN)/python benchmarks/bench_helical.py
+	$(BIN)/python benchmarks/bench_rv.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

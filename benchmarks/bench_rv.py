@@ -1,0 +1,168 @@
+"""Benchmark: RV (K-H-V) equilibrium solves, gearte against SciPy on the same contact potential, in the same run.
+
+The example `examples/rv_robot_joint.toml` (3 cranks, 2 discs, 40 pins, 97 output angles × 2 load directions):
+
+- **gearte, one unit**: `RVKHV.response` of one Monte Carlo unit's errors (the 194 solves, warm-started along the
+  grid), first call and best of further calls; per solve;
+- **gearte, Monte Carlo**: `gearte.monte_carlo(gearte.TEStudy(drive, errors, metric=...), n_samples=N)`, per unit and
+  per solve (the solves of a batch run one after another: see docs/rv.md);
+- **SciPy**: the same `ContactSystem` of every angle of that unit, minimised one solve at a time by
+  `scipy.optimize.minimize(method="trust-exact")` with the potential, its gradient and its (generalised) Hessian in
+  NumPy, from the nominal position, then the same rigid-limit step q − H⁻¹ f; its TE is checked against gearte's.
+
+    python benchmarks/bench_rv.py            # writes benchmarks/results/rv.md and .json
+    python benchmarks/bench_rv.py --quick    # a smoke run with small sizes (results not written)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+
+def numpy_system(s):
+    import numpy as np
+
+    return {k: np.asarray(getattr(s, k)) for k in ("G", "e", "k", "B", "eb", "c", "kb", "f", "mu")}
+
+
+def scipy_solve(s) -> tuple:
+    """Minimise the contact potential of one system with SciPy; returns (q, q_rigid, iterations, success)."""
+    import numpy as np
+    from scipy.optimize import minimize
+
+    from gearte.drives.rv_khv_equilibrium import FACE_NORMALS
+
+    N = FACE_NORMALS
+    G, e, k, B, eb, c, kb, f, mu = (s[x] for x in ("G", "e", "k", "B", "eb", "c", "kb", "f", "mu"))
+    poly = c > 0
+
+    def parts(q):
+        p = G @ q + e
+        r = np.einsum("bin,n->bi", B, q) + eb
+        P = r @ N.T - c[:, None]
+        return p, r, P
+
+    def fun(q):
+        p, r, P = parts(q)
+        pos = np.maximum(P, 0.0)
+        eb_ = 0.5 * kb * np.where(poly, np.sum(pos * pos, axis=-1), np.sum(r * r, axis=-1))
+        return 0.5 * np.sum(k * np.maximum(p, 0.0) ** 2) + np.sum(eb_) + 0.5 * mu * q @ q - f @ q
+
+    def jac(q):
+        p, r, P = parts(q)
+        force = kb[:, None] * np.where(poly[:, None], np.maximum(P, 0.0) @ N, r)
+        return G.T @ (k * np.maximum(p, 0.0)) + np.einsum("bin,bi->n", B, force) + mu * q - f
+
+    def hess(q):
+        p, _, P = parts(q)
+        H = (G.T * (k * (p > 0))) @ G
+        K = np.einsum("bf,fi,fj->bij", (P > 0).astype(float), N, N)
+        K = kb[:, None, None] * np.where(poly[:, None, None], K, np.eye(2))
+        return H + np.einsum("bim,bij,bjn->mn", B, K, B) + mu * np.eye(q.size)
+
+    q0 = np.zeros(G.shape[1])
+    res = minimize(fun, q0, jac=jac, hess=hess, method="trust-exact", options={"gtol": 1e-16, "maxiter": 2000})
+    q = res.x
+    q_rigid = q - np.linalg.solve(hess(q), f)
+    return q, q_rigid, int(res.nit), bool(res.success)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args(argv)
+
+    import jax
+    import numpy as np
+
+    jax.config.update("jax_enable_x64", True)
+    from bench_planetary_mc import best_of, machine_info, write_results
+
+    import gearte
+    from gearte.cli.config import load_study
+    from gearte.drives.rv_khv_contacts import output_index, rv_system
+
+    study = load_study(ROOT / "examples" / "rv_robot_joint.toml")
+    drive = study.drive
+    n_units = 8 if args.quick else 64
+    unit = jax.tree.map(lambda x: x[0], jax.vmap(study.errors.sample)(jax.random.key(7)[None]))
+    solves = 2 * drive.points
+
+    t0 = time.perf_counter()
+    r = drive.response(unit)
+    jax.block_until_ready(r.te)
+    first = time.perf_counter() - t0
+    one, _ = best_of(lambda: jax.block_until_ready(drive.response(unit).te), 2 if args.quick else 5)
+    steps = np.asarray(r.steps)
+
+    fn = gearte.TEStudy(drive, study.errors, metric=study.metric)
+    gearte.monte_carlo(fn, key=1, n_samples=n_units)
+    mc, _ = best_of(lambda: gearte.monte_carlo(fn, key=1, n_samples=n_units), 1 if args.quick else 2)
+
+    # SciPy on the same systems (a subset of the angles: it is slow), checked against gearte's TE.
+    idx = np.arange(0, drive.points, 8 if args.quick else 4)
+    err = drive.errors(unit)
+    L = float(drive.stage.pin_circle_radius)
+    i = output_index(drive)
+    systems = [numpy_system(rv_system(drive, err, drive.output_angles()[j], 1.0)) for j in idx]
+    t0 = time.perf_counter()
+    out = [scipy_solve(s) for s in systems]
+    scipy_t = (time.perf_counter() - t0) / len(systems)
+    te_scipy = np.asarray([o[1][i] / L for o in out])
+    te_gearte = np.asarray(r.te[0])[idx]
+    # Cold-started SciPy and warm-started gearte may land on different preloaded solutions (docs/rv.md, known defect):
+    # report the agreement as the share of angles within 1e-9 rad and the largest difference.
+    diff = np.abs(te_scipy - te_gearte)
+    agree = float(np.mean(diff < 1e-9))
+
+    per_solve_one = one / solves
+    per_unit_mc = mc / n_units
+    md = "\n".join(
+        [
+            "# RV (K-H-V) equilibrium solves: gearte against SciPy",
+            "",
+            f"Example `examples/rv_robot_joint.toml`, {drive.points} output angles × 2 loads = {solves} solves per unit; "
+            f"load average {os.getloadavg()[0]:.1f} at the start ({machine_info().get('cpu', '')}).",
+            "",
+            "| | time | per solve |",
+            "|---|---|---|",
+            f"| gearte, one unit, first call (compilation included) | {first:.2f} s | |",
+            f"| gearte, one unit, steady | {one * 1e3:.1f} ms | {per_solve_one * 1e6:.0f} µs |",
+            f"| gearte, Monte Carlo of {n_units} units, steady | {per_unit_mc * 1e3:.1f} ms per unit | "
+            f"{per_unit_mc / solves * 1e6:.0f} µs |",
+            f"| SciPy trust-exact, one solve at a time ({len(systems)} solves) | | {scipy_t * 1e6:.0f} µs |",
+            "",
+            f"gearte's Newton iterations per solve (this unit): mean {steps.mean():.1f}, max {int(steps.max())}. "
+            f"SciPy iterations: mean {np.mean([o[2] for o in out]):.1f}, converged {sum(o[3] for o in out)} of {len(out)}.",
+            f"Speed-up per solve, SciPy / gearte (one unit): {scipy_t / per_solve_one:.1f}×; "
+            f"Monte Carlo: {scipy_t / (per_unit_mc / solves):.1f}×. Target: ≤ 50 µs per solve, ≥ 100× SciPy.",
+            f"Agreement of the forward rigid-limit TE: {100 * agree:.0f} % of the {len(idx)} angles within 1e-9 rad, "
+            f"largest difference {diff.max() * 206264.8:.3g}″ (a warm-started and a cold-started solve of a preloaded unit "
+            "can differ: docs/rv.md, known defect).",
+        ]
+    )
+    result = {
+        "first_call_s": first,
+        "one_unit_s": one,
+        "per_solve_one_unit_us": per_solve_one * 1e6,
+        "monte_carlo_units": n_units,
+        "monte_carlo_per_unit_s": per_unit_mc,
+        "scipy_per_solve_us": scipy_t * 1e6,
+        "scipy_solves": len(systems),
+        "te_agreement_share": agree,
+        "te_max_difference_rad": float(diff.max()),
+        "machine": machine_info(),
+    }
+    write_results("rv", md, result, quick=args.quick)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
