@@ -62,6 +62,7 @@ NOTEBOOK_GROUPS = {
     "identify_and_assemble.ipynb": "identification",
     "planetary_wang2013.ipynb": "planetary",
     "helical_modification.ipynb": "helical",
+    "rv_reducer.ipynb": "rv",
 }
 #: Rough cost of each group (s, one worker, empty compilation cache): only their order matters.
 COST_S = {

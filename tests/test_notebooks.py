@@ -2,8 +2,8 @@
 
 Each notebook is executed cell by cell in an IPython shell in the test process
 (`notebook_runner.run_notebook`: what a Jupyter kernel runs, without the kernel process),
-from the notebooks folder, with ``GEARTE_NOTEBOOK_SAMPLES=2000`` so that the Monte Carlo
-studies stay short. Each runs on the worker that runs the tests of its subject
+from the notebooks folder, with ``GEARTE_NOTEBOOK_SAMPLES=2000`` (and ``GEARTE_NOTEBOOK_RV_UNITS=24``
+for the RV reducer, whose units are equilibrium solves) so that the Monte Carlo studies stay short. Each runs on the worker that runs the tests of its subject
 (`conftest.NOTEBOOK_GROUPS`), so it reuses their compiled functions.
 Notebooks are kept in the repository without outputs; that is checked too.
 """
@@ -19,12 +19,14 @@ from notebook_runner import run_notebook
 NOTEBOOK_DIR = Path(__file__).resolve().parents[1] / "notebooks"
 NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 SAMPLES = "2000"
+RV_UNITS = "24"
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
 def test_notebook_runs(path: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
     monkeypatch.setenv("GEARTE_NOTEBOOK_SAMPLES", SAMPLES)
+    monkeypatch.setenv("GEARTE_NOTEBOOK_RV_UNITS", RV_UNITS)
     monkeypatch.setenv("MPLBACKEND", "Agg")
     assert run_notebook(path, ipython_dir=tmp_path / "ipython") > 0
 
