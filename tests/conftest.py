@@ -1,3 +1,4 @@
+import gc
 import os
 import sys
 from pathlib import Path
@@ -62,7 +63,6 @@ NOTEBOOK_GROUPS = {
     "identify_and_assemble.ipynb": "identification",
     "planetary_wang2013.ipynb": "planetary",
     "helical_modification.ipynb": "helical",
-    "rv_reducer.ipynb": "rv",
 }
 #: Rough cost of each group (s, one worker, empty compilation cache): only their order matters.
 COST_S = {
@@ -89,6 +89,23 @@ def group_of(nodeid: str) -> tuple[str, bool]:
     if stem == "test_notebooks" and name.startswith("test_notebook_runs["):
         return NOTEBOOK_GROUPS.get(name[len("test_notebook_runs[") : -1], "notebooks"), True
     return GROUPS.get(stem, stem), False
+
+
+#: The group whose tests the worker ran last (`pytest_runtest_setup`).
+_LAST_GROUP: list[str] = []
+
+
+def pytest_runtest_setup(item):
+    """Between two groups on a worker, drop JAX's compiled programs: a group's tests share them, the next group
+    does not. A worker that keeps every program of every group it runs maps their machine code in tens of
+    thousands of memory regions (55,000 were counted late in a run); past the kernel's ``vm.max_map_count``
+    (65,530 by default) XLA's compiler and its executable (de)serialisation crash the worker (segfault or abort).
+    Programs needed again come back from the persistent compilation cache."""
+    group, _ = group_of(item.nodeid)
+    if _LAST_GROUP and _LAST_GROUP[0] != group:
+        jax.clear_caches()
+        gc.collect()
+    _LAST_GROUP[:] = [group]
 
 
 @pytest.hookimpl(tryfirst=True)
