@@ -478,16 +478,7 @@ class CycloidPin(AbstractGridDrive):
         a = self.analysis
         theta = revolution_angles(self, a.sweep_points_per_pitch, revolutions=a.sweep_revolutions)
         te = np.asarray(sweep(self, errors, theta, normal=False).rotation_error)
-        i, k = int(np.argmax(te)), int(np.argmin(te))
-        return Trace(
-            theta=theta,
-            te=te,
-            span_revs=str(a.sweep_revolutions),
-            max=float(te[i]),
-            min=float(te[k]),
-            theta_max=float(theta[i]),
-            theta_min=float(theta[k]),
-        )
+        return Trace.of_grid(theta, te, str(a.sweep_revolutions))
 
     @classmethod
     def from_table(cls, table: Table) -> CycloidPin:

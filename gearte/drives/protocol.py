@@ -151,6 +151,12 @@ class Trace:
     theta_min: float
     lines: list[tuple[str, float]] = dataclasses.field(default_factory=list)
 
+    @classmethod
+    def of_grid(cls, theta: np.ndarray, te: np.ndarray, span_revs: str) -> Trace:
+        """The trace of TE sampled on a grid of input angles, its extrema the grid's (no lines)."""
+        i, k = int(np.argmax(te)), int(np.argmin(te))
+        return cls(theta, te, span_revs, float(te[i]), float(te[k]), float(theta[i]), float(theta[k]))
+
 
 class AbstractStudyContext(abc.ABC):
     """What a drive's `study_outputs` is given by the study runner (so drives never import the studies)."""

@@ -367,16 +367,7 @@ class RVKHV(AbstractGridDrive):
         r = self.solve_at(errors, th_o)
         te = np.asarray(r.te[0])
         theta = np.asarray(th_o) * self.ratio
-        i, k = int(np.argmax(te)), int(np.argmin(te))
-        return Trace(
-            theta=theta,
-            te=te,
-            span_revs=f"{self.ratio:g}",
-            max=float(te[i]),
-            min=float(te[k]),
-            theta_max=float(theta[i]),
-            theta_min=float(theta[k]),
-        )
+        return Trace.of_grid(theta, te, f"{self.ratio:g}")
 
     @classmethod
     def from_table(cls, table: Table) -> RVKHV:
