@@ -112,6 +112,20 @@ def test_uniform_profile_clearance_gives_the_backlash_formula():
     assert lm == pytest.approx(ref, rel=2e-3)
 
 
+@pytest.mark.parametrize("towards", [1.0, -1.0], ids=["root-pin", "tip-pin"])
+def test_a_disc_pushed_along_the_line_of_centres_moves_by_the_normal_clearance(towards):
+    """Pins ground δ undersize leave a normal clearance δ at every pin, so a disc free to translate (a loose bearing)
+    and pushed along the line of centres moves by exactly δ before the pin on that line stops it (the pin at the tooth
+    root for +y, the one facing a lobe tip for −y). Both have zero lever arm: turning the disc cannot close them."""
+    delta = 4.0
+    err = CycloidErrors(pin_radius=-delta)
+    s = single_disc_system(STAGE, err, 0.0, clearance_mm=1.0)
+    s = eqx.tree_at(lambda t: t.f, s, jnp.asarray([0.0, towards * 1e-7, 0.0]))
+    eq = solve(s)
+    assert eq.result == RESULTS.successful
+    np.testing.assert_allclose(np.asarray(eq.q_rigid), [0.0, towards * delta * 1e-3, 0.0], atol=1e-12)
+
+
 def test_pin_radius_error_gives_the_closed_form_lost_motion(drive):
     """The whole drive (3 cranks, 2 discs, rigid bearings, no backlash) with undersize pins, Δr′ = −c.
 
