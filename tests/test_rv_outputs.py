@@ -154,7 +154,7 @@ def test_reference_unit_lost_motion_of_undersize_pins(undersize):
 def test_contact_map_counts_the_forces_and_the_right_flanks(drive, undersize):
     s, c = undersize
     force = np.asarray(drive.solve_at({"pin_radius": -UNDERSIZE_UM}, drive.output_angles()).force)
-    loaded = force > LOADED_FRACTION * 1e-7  # k_pin = 1, deflection 1e-7 mm
+    loaded = force > LOADED_FRACTION * float(drive.deflection_mm)  # k_pin = 1
     np.testing.assert_array_equal(loaded_contacts(drive, force), loaded)
     np.testing.assert_array_equal(c["contact_loaded_forward"], loaded[0])
     assert [g[1:] for g in contact_groups(drive)] == [(0, ZP), (ZP, 2 * ZP), (2 * ZP, 2 * ZP + 6)]
@@ -259,7 +259,7 @@ def test_study_outputs_draw_every_figure_the_report_shows(drive, metric, tmp_pat
     assert any(label.startswith("lost motion, max") for label in labels) == (metric.name != "lost_motion")
     assert set(out.arrays) >= {"lost_motion_max_arcmin", "te_p2p_forward_arcsec", "solved"}
     assert out.files["reference_unit.npz"]["force_forward"].shape == (POINTS, 2 * ZP + 6)
-    assert resolution(drive) == pytest.approx(10 * 1e-7 / R)
+    assert resolution(drive) == pytest.approx(10 * 1e-9 / R)  # the default deflection_mm
 
 
 def test_no_jax_arrays_leak_into_the_summary(undersize):

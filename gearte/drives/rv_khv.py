@@ -186,8 +186,10 @@ class RVKHV(AbstractGridDrive):
       error sources of the same names are deviations from these.
     - `points`: output angles of the grid over one output revolution (default 360).
     - `trace_points`: output angles of the report's TE curve (default 2 × `points`).
-    - `deflection_mm`: the elastic deflection scale of the small load (default 1e-7 mm); the rigid-limit
-      results do not depend on it while it is far below every clearance.
+    - `deflection_mm`: the elastic deflection scale of the small load (default 1e-9 mm). The rigid-limit results
+      do not depend on it inside a window: it must be small enough that the load does not move the weak modes of
+      preloaded parts (about 1e-5 of the pin stiffness) across a change of contact state, and large against the
+      regularisation's force μ |q − q₀| (docs/rv.md, "Size of the small load").
     - `pin_stiffness`, `mesh_stiffness`, `bearing_stiffness`: relative stiffnesses (default 1).
     - `regularisation`: μ / k_pin for floating parts (default 1e-12).
     """
@@ -235,7 +237,7 @@ class RVKHV(AbstractGridDrive):
         main_bearing_clearance_mm: float = 0.0,
         points: int = 360,
         trace_points: int | None = None,
-        deflection_mm: float = 1e-7,
+        deflection_mm: float = 1e-9,
         pin_stiffness: float = 1.0,
         mesh_stiffness: float = 1.0,
         bearing_stiffness: float = 1.0,

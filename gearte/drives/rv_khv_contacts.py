@@ -81,7 +81,7 @@ def pin_contacts(stage: CycloidPin, errors: CycloidErrors, theta_T) -> tuple[Arr
 
 
 def single_disc_system(
-    stage: CycloidPin, errors: CycloidErrors, theta_T, *, clearance_mm=0.0, deflection_mm=1e-7, load_sign=1.0, mu=1e-12
+    stage: CycloidPin, errors: CycloidErrors, theta_T, *, clearance_mm=0.0, deflection_mm=1e-9, load_sign=1.0, mu=1e-12
 ) -> ContactSystem:
     """Hidaka et al.'s (1994) small illustration: one disc (x, y, θ) on one central crank (a bearing of radial
     clearance `clearance_mm`), against the fixed pins, in the converted frame, under a torque of sign `load_sign`
