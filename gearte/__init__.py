@@ -381,8 +381,6 @@ _LAZY: dict[str, str] = {
 }
 
 __all__ = [
-    "AbstractStiffnessModel",
-    "MeanStiffness",
     "RESULTS",
     "RMS",
     "RVKHV",
@@ -396,6 +394,7 @@ __all__ = [
     "AbstractPhase",
     "AbstractSinusoidalDrive",
     "AbstractStatistic",
+    "AbstractStiffnessModel",
     "AbstractValueLaw",
     "AssemblyPhases",
     "BatchAssembly",
@@ -440,6 +439,7 @@ __all__ = [
     "LostMotion",
     "LostMotionMin",
     "MeanKSigma",
+    "MeanStiffness",
     "MeasuredAllocation",
     "MeasuredRecord",
     "ModificationSolution",
