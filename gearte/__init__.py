@@ -81,6 +81,12 @@ if TYPE_CHECKING:
         modifications_from_amounts as modifications_from_amounts,
     )
     from .drives.helical_solve import PeriodicSolver as PeriodicSolver
+    from .drives.helical_stiffness import (
+        AbstractStiffnessModel as AbstractStiffnessModel,
+        MeanStiffness as MeanStiffness,
+        SlicedStiffness as SlicedStiffness,
+        TransverseStiffness as TransverseStiffness,
+    )
     from .identification import (
         BatchAssembly as BatchAssembly,
         Diagnosis as Diagnosis,
@@ -270,6 +276,10 @@ _LAZY: dict[str, str] = {
     "ToothModification": ".drives.helical_modifications",
     "modifications_from_amounts": ".drives.helical_modifications",
     "PeriodicSolver": ".drives.helical_solve",
+    "AbstractStiffnessModel": ".drives.helical_stiffness",
+    "SlicedStiffness": ".drives.helical_stiffness",
+    "TransverseStiffness": ".drives.helical_stiffness",
+    "MeanStiffness": ".drives.helical_stiffness",
     "BatchAssembly": ".identification",
     "Diagnosis": ".identification",
     "Identification": ".identification",
@@ -384,6 +394,7 @@ __all__ = [
     "AbstractPhase",
     "AbstractSinusoidalDrive",
     "AbstractStatistic",
+    "AbstractStiffnessModel",
     "AbstractValueLaw",
     "AssemblyPhases",
     "BatchAssembly",
@@ -428,6 +439,7 @@ __all__ = [
     "LostMotion",
     "LostMotionMin",
     "MeanKSigma",
+    "MeanStiffness",
     "MeasuredAllocation",
     "MeasuredRecord",
     "ModificationSolution",
@@ -455,6 +467,7 @@ __all__ = [
     "RuleProblem",
     "SensitivityTable",
     "Sinusoid",
+    "SlicedStiffness",
     "SobolIndices",
     "SobolSequence",
     "SourceSpec",
@@ -466,6 +479,7 @@ __all__ = [
     "TESignal",
     "TEStudy",
     "ToothModification",
+    "TransverseStiffness",
     "TruncatedNormal",
     "TwoScaleExtrema",
     "Uniform",

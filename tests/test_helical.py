@@ -7,6 +7,7 @@ at its small size: they run on one worker (conftest.py) and share the compiled s
 """
 
 import math
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -14,13 +15,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from gearte import AbstractStiffnessModel, MeanStiffness, SlicedStiffness, TransverseStiffness
 from gearte.core.signal import evaluate
-from gearte.drives.helical import EXAMPLE, HelicalPlanetary, load_helical
-from gearte.drives.helical_equations import MeshedSystem, loa_errors
+from gearte.drives.helical import EXAMPLE, HelicalPlanetary, load_helical, wind_turbine_report
+from gearte.drives.helical_equations import MeshedSystem, loa_errors, stage_system
 from gearte.drives.helical_geometry import geometry, iso6336_mesh_stiffness
 from gearte.drives.helical_modifications import StageModifications, ToothModification, crowning, flank_pair_relief
 from gearte.drives.helical_solve import PeriodicSolver, solve_periodic
-from gearte.drives.helical_stiffness import SlicedMeshes, pair_range
+from gearte.drives.helical_stiffness import SlicedMeshes, pair_range, slice_centres
 from gearte.drives.planetary_2kh import Planetary2KH
 from gearte.drives.protocol import Eccentricity
 from gearte.optimise.helical_modification import _fluctuation, _smooth_objective
@@ -63,12 +65,11 @@ def test_geometry_matches_iso21771_by_hand_and_the_file_uses_iso6336_stiffness(m
     np.testing.assert_allclose(st.mesh_stiffness, c_gamma, atol=0.006)
 
 
-def _weights(model, n_slices, *, spur=False):
+def _weights(model, n_slices, stiffness_model: AbstractStiffnessModel = SlicedStiffness()):
     st = model.stage
     g = geometry(st)
-    exc = SlicedMeshes(st, g, StageModifications(), None, n_slices=n_slices, pairs=pair_range(g, float(st.face_width), n_slices))
-    if spur:
-        exc = eqx.tree_at(lambda e: e.lead_shift, exc, jnp.zeros(n_slices))
+    pairs = pair_range(g, float(st.face_width), n_slices)
+    exc = SlicedMeshes(st, g, StageModifications(), None, n_slices=n_slices, pairs=pairs, stiffness_model=stiffness_model)
     taus = jnp.linspace(0.0, 1.0, 4000, endpoint=False)
     _, w = eqx.filter_jit(lambda e, t: jax.vmap(e.positions)(t))(exc, taus)
     return g, w  # (T, meshes, slices, pairs)
@@ -82,10 +83,72 @@ def test_sliced_stiffness_has_the_iso_mean_and_the_spur_limit_alternates_single_
     np.testing.assert_allclose(jnp.mean(per_slice, axis=0)[:n], float(g.contact_ratio[0]), rtol=1e-3)
     np.testing.assert_allclose(jnp.mean(per_slice, axis=0)[n:], float(g.contact_ratio[1]), rtol=1e-3)
     # Spur limit (every slice in phase): one or two pairs; two for a fraction ε_α − 1 of the period.
-    _, w = _weights(model, 8, spur=True)
+    _, w = _weights(model, 8, TransverseStiffness())
     total = np.asarray(jnp.mean(jnp.sum(w, axis=-1), axis=-1)[:, 0])
     assert total.min() == pytest.approx(1.0, abs=1e-9) and total.max() == pytest.approx(2.0, abs=1e-9)
     np.testing.assert_allclose(np.mean(total > 1.5), float(g.contact_ratio[0]) - 1, atol=0.05)
+
+
+def test_stiffness_models_lead_shifted_in_phase_and_constant(model):
+    """`SlicedStiffness`: slice k runs (z_k − z_0) tan β_b / p_bt mesh periods ahead of slice 0.
+    `TransverseStiffness`: every slice in phase, exactly the sliced pairs with the lead shift removed (what
+    ``stiffness_model="transverse"`` computed). `MeanStiffness`: constant, the sliced model's time average ε_α."""
+    st = model.stage
+    g = geometry(st)
+    exc = SlicedMeshes(st, g, StageModifications(), None, n_slices=8, pairs=pair_range(g, float(st.face_width), 8))
+    taus = jnp.linspace(0.0, 1.0, 4000, endpoint=False)
+    weights = eqx.filter_jit(lambda e, t: jax.vmap(e.positions)(t)[1])
+    w_sliced = weights(exc, taus)
+    per_slice = np.asarray(jnp.sum(w_sliced, axis=-1))  # (T, meshes, slices)
+    z = slice_centres(st.face_width, 8)
+    ahead = (z - z[0]) * jnp.tan(g.base_helix_angle) / g.base_pitch  # mesh periods
+    assert float(ahead[-1]) > 0.5  # a large shift: the test sees it
+    for k in (1, 7):
+        slice_0_later = np.asarray(jnp.sum(weights(exc, taus + ahead[k]), axis=-1))[:, :, 0]
+        np.testing.assert_allclose(per_slice[:, :, k], slice_0_later, atol=1e-9)
+    _, w_trans = _weights(model, 8, TransverseStiffness())
+    np.testing.assert_array_equal(w_trans, np.broadcast_to(w_trans[:, :, :1], w_trans.shape))  # every slice in phase
+    no_lead = eqx.tree_at(lambda e: e.lead_shift, exc, jnp.zeros(8))
+    np.testing.assert_array_equal(w_trans, weights(no_lead, taus))
+    _, w_mean = _weights(model, 8, MeanStiffness())
+    mean = np.asarray(jnp.sum(w_mean, axis=-1))
+    np.testing.assert_array_equal(mean, np.broadcast_to(mean[:1], mean.shape))  # constant in time
+    np.testing.assert_allclose(mean[0], per_slice.mean(axis=0), rtol=1e-3)
+
+
+def test_stiffness_model_must_be_an_object_and_files_name_one(model, tmp_path):
+    st = model.stage
+    g = geometry(st)
+    with pytest.raises(
+        ValueError, match=r"stiffness_model: .*SlicedStiffness\(\), TransverseStiffness\(\), MeanStiffness\(\).*use MeanStiffness\(\)"
+    ):
+        HelicalPlanetary(st, n_slices=4, stiffness_model="mean")  # pyright: ignore[reportArgumentType]
+    with pytest.raises(ValueError, match="stiffness_model: give a stiffness model object"):
+        stage_system(st, StageModifications(), stiffness_model=SlicedStiffness)  # pyright: ignore[reportArgumentType]
+    with pytest.raises(ValueError, match="stiffness_model: give a stiffness model object"):
+        SlicedMeshes(st, g, StageModifications(), None, n_slices=4, pairs=(0, 1), stiffness_model="spur")  # pyright: ignore[reportArgumentType]
+    with pytest.raises(ValueError, match=r"stiffness_models\[1\]: .*use TransverseStiffness\(\)"):
+        wind_turbine_report(stiffness_models=(SlicedStiffness(), "transverse"))  # pyright: ignore[reportArgumentType]
+
+    class NoContacts(AbstractStiffnessModel):
+        name: ClassVar[str] = "half"
+
+    class NoName(AbstractStiffnessModel):
+        def contacts(self, meshes, tau):
+            return SlicedStiffness().contacts(meshes, tau)
+
+    for half in (NoContacts, NoName):  # a model declares both
+        with pytest.raises(TypeError, match="abstract"):
+            half()  # pyright: ignore[reportAbstractUsage]
+    text = EXAMPLE.read_text(encoding="utf-8")
+    assert 'stiffness_model = "slices"' in text
+    for name, cls in (("slices", SlicedStiffness), ("transverse", TransverseStiffness), ("mean", MeanStiffness)):
+        path = tmp_path / f"{name}.toml"
+        path.write_text(text.replace('stiffness_model = "slices"', f'stiffness_model = "{name}"'), encoding="utf-8")
+        assert type(load_helical(path).stiffness_model) is cls
+    path.write_text(text.replace('stiffness_model = "slices"', 'stiffness_model = "spur"'), encoding="utf-8")
+    with pytest.raises(ValueError, match=r"\[model\]\.stiffness_model: one of 'slices', 'transverse', 'mean', got 'spur'"):
+        load_helical(path)
 
 
 def test_tip_relief_and_crowning_values():
@@ -191,7 +254,7 @@ def test_solution_converges_at_the_fifth_order_of_tsit5():
 
 
 def test_constant_stiffness_and_no_excitation_give_no_fluctuation(model, response):
-    const = HelicalPlanetary(model.stage, n_slices=4, stiffness_model="mean", solver=SOLVER)
+    const = HelicalPlanetary(model.stage, n_slices=4, stiffness_model=MeanStiffness(), solver=SOLVER)
     r = response(const, None, None)
     assert float(jnp.max(r.fluctuation)) < 1e-9
     assert float(r.output_te_peak_to_peak) < 1e-14

@@ -31,7 +31,14 @@ from .helical_equations import SUN, StageSystem, error_sources, stage_system
 from .helical_geometry import MEMBERS, HelicalStage, geometry
 from .helical_modifications import StageModifications, modifications_from_amounts
 from .helical_solve import PeriodicSolver, harmonics, peak_to_peak, smooth_peak_to_peak, solve_periodic
-from .helical_stiffness import STIFFNESS_MODELS, SlicedMeshes, pair_range
+from .helical_stiffness import (
+    STIFFNESS_MODELS,
+    AbstractStiffnessModel,
+    SlicedStiffness,
+    TransverseStiffness,
+    check_stiffness_model,
+    pair_range,
+)
 from .protocol import Eccentricity
 
 #: Zhang, Chen & Wang's unmodified DTE fluctuations of the 750 kW stage, µm (external s–p, internal p–r).
@@ -68,9 +75,9 @@ class HelicalPlanetary(eqx.Module):
 
     - `stage`: the `HelicalStage`.
     - `n_slices`: K slices across the face width (8 resolves the wind-turbine stage's fluctuation to < 0.5 %).
-    - `stiffness_model`: "slices" (time-varying, helical overlap included), "transverse" (every slice in
-      phase: the rectangular single/double-contact alternation of a spur pair, ε_α only) or "mean"
-      (constant c_γ b).
+    - `stiffness_model`: an `AbstractStiffnessModel`: `SlicedStiffness()` (time-varying, helical overlap
+      included; the default), `TransverseStiffness()` (every slice in phase: the rectangular
+      single/double-contact alternation of a spur pair, ε_α only) or `MeanStiffness()` (constant c_γ b).
     - `contact_smoothing`: ℓ, µm, of the smooth unilateral contact law.
     - `solver`: a `PeriodicSolver`.
     """
@@ -79,7 +86,7 @@ class HelicalPlanetary(eqx.Module):
     solver: PeriodicSolver
     contact_smoothing: float = eqx.field(static=True)
     n_slices: int = eqx.field(static=True)
-    stiffness_model: str = eqx.field(static=True)
+    stiffness_model: AbstractStiffnessModel
     pairs: tuple[int, int] = eqx.field(static=True)
 
     def __init__(
@@ -87,19 +94,17 @@ class HelicalPlanetary(eqx.Module):
         stage: HelicalStage,
         *,
         n_slices: int = 8,
-        stiffness_model: str = "slices",
+        stiffness_model: AbstractStiffnessModel = SlicedStiffness(),
         contact_smoothing: float = 0.02,
         solver: PeriodicSolver | None = None,
     ):
         if not isinstance(stage, HelicalStage):
             raise ValueError("HelicalPlanetary: stage must be a HelicalStage")
-        if stiffness_model not in (*STIFFNESS_MODELS, "transverse"):
-            raise ValueError(f"stiffness_model: one of 'slices', 'transverse', 'mean', got {stiffness_model!r}")
         if not (math.isfinite(contact_smoothing) and contact_smoothing > 0):
             raise ValueError(f"contact_smoothing: must be > 0 µm, got {contact_smoothing!r}")
         self.stage = stage
         self.n_slices = as_int("n_slices", n_slices, minimum=1)
-        self.stiffness_model = stiffness_model
+        self.stiffness_model = check_stiffness_model("stiffness_model", stiffness_model)
         self.contact_smoothing = float(contact_smoothing)
         self.solver = solver if solver is not None else PeriodicSolver()
         self.pairs = pair_range(geometry(stage), float(stage.face_width), self.n_slices)
@@ -111,20 +116,15 @@ class HelicalPlanetary(eqx.Module):
 
     def system(self, modifications: StageModifications | None = None, errors: Mapping[str, Eccentricity] | None = None) -> StageSystem:
         """The dimensionless equations of motion with these modifications and eccentricity errors."""
-        sys = stage_system(
+        return stage_system(
             self.stage,
             modifications if modifications is not None else StageModifications(),
             errors,
             n_slices=self.n_slices,
-            stiffness_model="slices" if self.stiffness_model == "transverse" else self.stiffness_model,
+            stiffness_model=self.stiffness_model,
             contact_smoothing=self.contact_smoothing,
             pairs=self.pairs,
         )
-        if self.stiffness_model == "transverse":
-            exc = sys.system.excitation
-            assert isinstance(exc, SlicedMeshes)
-            sys = eqx.tree_at(lambda s: s.system.excitation, sys, eqx.tree_at(lambda e: e.lead_shift, exc, jnp.zeros_like(exc.lead_shift)))
-        return sys
 
     def response(
         self, modifications: StageModifications | None = None, errors: Mapping[str, Eccentricity] | None = None
@@ -190,6 +190,15 @@ def _num(table: Mapping, key: str, where: str) -> float:
     return float(v)
 
 
+def _stiffness_model(model: Mapping, where: str) -> AbstractStiffnessModel:
+    """The stiffness model named by the file's ``stiffness_model`` key (the models' `name`s; "slices" when absent)."""
+    by_name = {cls.name: cls for cls in STIFFNESS_MODELS}
+    name = model.get("stiffness_model", SlicedStiffness.name)
+    if not isinstance(name, str) or name not in by_name:
+        raise ValueError(f"{where}.stiffness_model: one of {', '.join(repr(n) for n in by_name)}, got {name!r}")
+    return by_name[name]()
+
+
 def load_helical(path: str | Path) -> HelicalPlanetary:
     """Read a helical stage parameter file (the layout of ``examples/dynamics/helical_wind_turbine.toml``)."""
     path = Path(path)
@@ -242,7 +251,7 @@ def load_helical(path: str | Path) -> HelicalPlanetary:
     return HelicalPlanetary(
         stage,
         n_slices=int(model.get("n_slices", 8)),
-        stiffness_model=str(model.get("stiffness_model", "slices")),
+        stiffness_model=_stiffness_model(model, f"{w} [model]"),
         contact_smoothing=float(model.get("contact_smoothing_um", 0.02)),
         solver=solver,
     )
@@ -251,22 +260,28 @@ def load_helical(path: str | Path) -> HelicalPlanetary:
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "dynamics" / "helical_wind_turbine.toml"
 
 
-def wind_turbine_report(path: str | Path = EXAMPLE, *, stiffness_models: tuple[str, ...] = ("slices", "transverse")) -> str:
-    """Solve the unmodified wind-turbine stage and compare its DTE fluctuations with Zhang, Chen & Wang's (markdown)."""
+def wind_turbine_report(
+    path: str | Path = EXAMPLE,
+    *,
+    stiffness_models: tuple[AbstractStiffnessModel, ...] = (SlicedStiffness(), TransverseStiffness()),
+) -> str:
+    """Solve the unmodified wind-turbine stage and compare its DTE fluctuations with Zhang, Chen & Wang's (markdown),
+    one row per stiffness model (`AbstractStiffnessModel`s, named by their `name`)."""
+    models = [check_stiffness_model(f"stiffness_models[{i}]", m) for i, m in enumerate(stiffness_models)]
     base = load_helical(path)
     lines = [
         "| stiffness model | external s–p (µm) | internal p–r (µm) | mean DTE ext / int (µm) | output TE p-p (″) | periodicity (µm) |",
         "|---|---|---|---|---|---|",
     ]
     n = base.stage.n_planets
-    for model in stiffness_models:
+    for model in models:
         m = HelicalPlanetary(
             base.stage, n_slices=base.n_slices, stiffness_model=model, contact_smoothing=base.contact_smoothing, solver=base.solver
         )
         r = eqx.filter_jit(m.response)()
         mean = jnp.mean(r.dte, axis=-1)
         lines.append(
-            f"| {model} | {float(r.fluctuation[0]):.3f} | {float(r.fluctuation[n]):.3f} | {float(mean[0]):.2f} / {float(mean[n]):.2f} "
+            f"| {model.name} | {float(r.fluctuation[0]):.3f} | {float(r.fluctuation[n]):.3f} | {float(mean[0]):.2f} / {float(mean[n]):.2f} "
             f"| {float(r.output_te_peak_to_peak) * ARCSEC_PER_RAD:.3f} | {float(r.periodicity):.1e} |"
         )
     lines.append(

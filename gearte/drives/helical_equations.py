@@ -33,7 +33,7 @@ from jaxtyping import Array, Float
 
 from .helical_geometry import Geometry, HelicalStage, geometry
 from .helical_modifications import StageModifications
-from .helical_stiffness import SlicedMeshes, pair_range, slice_centres
+from .helical_stiffness import AbstractStiffnessModel, SlicedMeshes, SlicedStiffness, check_stiffness_model, pair_range, slice_centres
 from .planetary_2kh import SOURCES, member_speeds
 from .protocol import Eccentricity, SourceSpec
 
@@ -290,7 +290,7 @@ def stage_system(
     errors: Mapping[str, Eccentricity] | None = None,
     *,
     n_slices: int = 8,
-    stiffness_model: str = "slices",
+    stiffness_model: AbstractStiffnessModel = SlicedStiffness(),
     contact_smoothing: float = 0.02,
     pairs: tuple[int, int] | None = None,
 ) -> StageSystem:
@@ -299,11 +299,14 @@ def stage_system(
     **Arguments:**
 
     - `n_slices`: K, slices across the face width.
-    - `stiffness_model`: "slices" (time-varying, `gearte.drives.helical_stiffness`) or "mean" (constant c_γ b).
+    - `stiffness_model`: an `AbstractStiffnessModel` (`gearte.drives.helical_stiffness`): `SlicedStiffness()`
+      (time-varying, helical overlap included), `TransverseStiffness()` (every slice in phase) or
+      `MeanStiffness()` (constant c_γ b).
     - `contact_smoothing`: ℓ of the smooth unilateral contact, µm.
     - `pairs`: the tooth-pair index range (computed from the geometry when None: give it when the
       geometry is traced).
     """
+    check_stiffness_model("stiffness_model", stiffness_model)
     geom = geometry(stage)
     lay = layout(stage, geom)
     d = stage.n_dof
@@ -331,7 +334,7 @@ def stage_system(
     c_pair = jnp.repeat(c_mesh / (eps_alpha * n_slices), n_slices)
     load = jnp.zeros(d).at[5].set(1e3 * stage.carrier_torque / lay.radius[CARRIER])  # N·mm / mm = N
     exc_errors = loa_errors(stage, geom, errors) if errors else None
-    excitation = SlicedMeshes(stage, geom, modifications, exc_errors, n_slices=n_slices, pairs=pairs, model=stiffness_model)
+    excitation = SlicedMeshes(stage, geom, modifications, exc_errors, n_slices=n_slices, pairs=pairs, stiffness_model=stiffness_model)
     tm = geom.mesh_period
     k_ref = k_mean[0]
     system = MeshedSystem(

@@ -18,22 +18,29 @@ helical gears, and constant when ε_β is whole. A slice model rather than a Fou
 alternation: it handles the overlap ratio by construction, and the same slices carry the crowning
 (a load distribution across the face) and the profile relief of each pair.
 
-`mean` mode keeps one pair per slice at the pitch point with weight ε_α (constant stiffness c_γ b).
+How the stiffness varies is an option object, as optimistix passes a solver: `SlicedStiffness` (the
+above, the default), `TransverseStiffness` (every slice in phase: the rectangular single/double-contact
+alternation of a spur pair, ε_α only, smoothed over the slice span) and `MeanStiffness` (one pair per
+slice at the pitch point with weight ε_α: constant stiffness c_γ b), subclasses of
+`AbstractStiffnessModel`.
 """
 
-from __future__ import annotations
-
+import abc
 import math
 from collections.abc import Callable
+from typing import TYPE_CHECKING, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+if TYPE_CHECKING:  # equinox's workaround for pyright#4965 (`equinox.AbstractClassVar`'s docstring)
+    from typing import ClassVar as AbstractClassVar
+else:
+    from equinox import AbstractClassVar
+
 from .helical_geometry import Geometry, HelicalStage, lead_mismatch_gap, mesh_phases
 from .helical_modifications import StageModifications, crowning, flank_pair_relief
-
-STIFFNESS_MODELS = ("slices", "mean")
 
 
 def slice_centres(face_width, n_slices: int) -> Float[Array, " k"]:
@@ -59,14 +66,87 @@ def pair_range(geom: Geometry, face_width: float, n_slices: int) -> tuple[int, i
     return lo, hi
 
 
+class AbstractStiffnessModel(eqx.Module):
+    """How the mesh stiffness of a `SlicedMeshes` varies over a mesh period.
+
+    A model places the tooth pairs of every slice on the path of contact and weighs them; a pair of
+    weight w is a spring of c_γ b w / (ε_α K). Class variable: `name`, the model's name in parameter
+    files (``stiffness_model = "slices"``) and reports.
+    """
+
+    name: AbstractClassVar[str]
+
+    @abc.abstractmethod
+    def contacts(self, meshes: "SlicedMeshes", tau) -> tuple[Float[Array, "m k j"], Float[Array, "m k j"]]:
+        """Position u (mm from the start of the path of contact) and contact weight of every pair
+        j of every slice k of every mesh m of `meshes`, at τ (mesh periods)."""
+
+
+def _pairs_on_path(meshes: "SlicedMeshes", tau, lead_shift) -> tuple[Float[Array, "m k j"], Float[Array, "m k j"]]:
+    """Pairs travelling along the path of contact, slice k shifted by `lead_shift[k]` (mm); weight: the
+    fraction of the slice's span on the path (module docstring)."""
+    j = jnp.arange(meshes.pairs[0], meshes.pairs[1], dtype=float)
+    pbt = meshes.base_pitch
+    lead = meshes.pitch_point[:, None] + pbt * (tau + meshes.phase[:, None]) + lead_shift[None, :]
+    base = jnp.mod(lead, pbt)
+    u = base[..., None] - j * pbt
+    w = contact_fraction(u, meshes.half_span, meshes.path_length[:, None, None])
+    return u, w
+
+
+class SlicedStiffness(AbstractStiffnessModel):
+    """Time-varying stiffness with the helical overlap: slice k's contact lines lead by z_k tan β_b (the default)."""
+
+    name: ClassVar[str] = "slices"
+
+    def contacts(self, meshes: "SlicedMeshes", tau) -> tuple[Float[Array, "m k j"], Float[Array, "m k j"]]:
+        return _pairs_on_path(meshes, tau, meshes.lead_shift)
+
+
+class TransverseStiffness(AbstractStiffnessModel):
+    """Every slice in phase (no lead shift): the rectangular single/double-contact alternation of a spur pair,
+    ε_α only, smoothed over the slice span ±Δz tan β_b/2."""
+
+    name: ClassVar[str] = "transverse"
+
+    def contacts(self, meshes: "SlicedMeshes", tau) -> tuple[Float[Array, "m k j"], Float[Array, "m k j"]]:
+        return _pairs_on_path(meshes, tau, jnp.zeros_like(meshes.lead_shift))
+
+
+class MeanStiffness(AbstractStiffnessModel):
+    """Constant stiffness c_γ b: one pair per slice at the pitch point, of weight ε_α."""
+
+    name: ClassVar[str] = "mean"
+
+    def contacts(self, meshes: "SlicedMeshes", tau) -> tuple[Float[Array, "m k j"], Float[Array, "m k j"]]:
+        u = jnp.broadcast_to(meshes.pitch_point[:, None, None], (meshes.phase.shape[0], meshes.n_slices, 1))
+        return u, jnp.broadcast_to(meshes.contact_ratio[:, None, None], u.shape)
+
+
+#: The stiffness models, in the order error messages list them.
+STIFFNESS_MODELS: tuple[type[AbstractStiffnessModel], ...] = (SlicedStiffness, TransverseStiffness, MeanStiffness)
+
+
+def check_stiffness_model(argument: str, model) -> AbstractStiffnessModel:
+    """`model` if it is an `AbstractStiffnessModel`, else a ValueError naming `argument` and the classes to use."""
+    if isinstance(model, AbstractStiffnessModel):
+        return model
+    classes = ", ".join(f"{c.__name__}()" for c in STIFFNESS_MODELS)
+    hint = ""
+    if isinstance(model, str):
+        named = [c for c in STIFFNESS_MODELS if c.name == model]
+        hint = f" (use {named[0].__name__}(); names are for parameter files)" if named else ""
+    raise ValueError(f"{argument}: give a stiffness model object, one of {classes}, got {model!r}{hint}")
+
+
 class SlicedMeshes(eqx.Module):
     """Gap excitation and contact weights of every tooth pair in every slice of every mesh.
 
     Meshes are ordered sun–planet 1 … N, then planet–ring 1 … N. Calling it at τ (mesh periods)
     returns ``(gap, weight)``, each of shape (2N·K, J): `gap` (µm) is the excitation added to the
     members' approach along the contact normal (LOA errors plus the lead mismatch minus the
-    modification), `weight` the
-    pair's contact weight (0 … 1).
+    modification), `weight` the pair's contact weight (0 … 1; ε_α for `MeanStiffness`'s one pair).
+    `stiffness_model` (an `AbstractStiffnessModel`, `SlicedStiffness()` by default) places and weighs the pairs.
     """
 
     path_length: Float[Array, " m"]
@@ -80,10 +160,10 @@ class SlicedMeshes(eqx.Module):
     mismatch: Float[Array, "m k"]
     modifications: StageModifications
     errors: Callable[[Array], Array] | None
+    stiffness_model: AbstractStiffnessModel
     n_planets: int = eqx.field(static=True)
     n_slices: int = eqx.field(static=True)
     pairs: tuple[int, int] = eqx.field(static=True)
-    model: str = eqx.field(static=True)
 
     def __init__(
         self,
@@ -94,10 +174,9 @@ class SlicedMeshes(eqx.Module):
         *,
         n_slices: int,
         pairs: tuple[int, int],
-        model: str = "slices",
+        stiffness_model: AbstractStiffnessModel = SlicedStiffness(),
     ):
-        if model not in STIFFNESS_MODELS:
-            raise ValueError(f"mesh stiffness model: one of {STIFFNESS_MODELS}, got {model!r}")
+        self.stiffness_model = check_stiffness_model("stiffness_model", stiffness_model)
         n = stage.n_planets
         ones = jnp.ones(n)
         ext_phase, int_phase = mesh_phases(stage)
@@ -117,20 +196,12 @@ class SlicedMeshes(eqx.Module):
         self.mismatch = jnp.concatenate([jnp.broadcast_to(mismatch[0], (n, n_slices)), jnp.broadcast_to(mismatch[1], (n, n_slices))])
         self.modifications = modifications
         self.errors = errors
-        self.n_planets, self.n_slices, self.pairs, self.model = n, n_slices, pairs, model
+        self.n_planets, self.n_slices, self.pairs = n, n_slices, pairs
 
     def positions(self, tau) -> tuple[Float[Array, "m k j"], Float[Array, "m k j"]]:
-        """Position u (mm) on the path of contact and contact weight of every pair, at τ (mesh periods)."""
-        j = jnp.arange(self.pairs[0], self.pairs[1], dtype=float)
-        pbt = self.base_pitch
-        if self.model == "mean":
-            u = jnp.broadcast_to(self.pitch_point[:, None, None], (self.phase.shape[0], self.n_slices, 1))
-            return u, jnp.broadcast_to(self.contact_ratio[:, None, None], u.shape)
-        lead = self.pitch_point[:, None] + pbt * (tau + self.phase[:, None]) + self.lead_shift[None, :]
-        base = jnp.mod(lead, pbt)
-        u = base[..., None] - j * pbt
-        w = contact_fraction(u, self.half_span, self.path_length[:, None, None])
-        return u, w
+        """Position u (mm) on the path of contact and contact weight of every pair, at τ (mesh periods), as the
+        stiffness model places them (`AbstractStiffnessModel.contacts`)."""
+        return self.stiffness_model.contacts(self, tau)
 
     def __call__(self, tau) -> tuple[Float[Array, "s j"], Float[Array, "s j"]]:
         u, w = self.positions(tau)
