@@ -151,6 +151,24 @@ def test_stiffness_model_must_be_an_object_and_files_name_one(model, tmp_path):
         load_helical(path)
 
 
+def test_parameter_files_name_the_table_and_key_of_a_bad_number(tmp_path):
+    """Tooth counts and solver counts are whole numbers: 21.5 teeth or "8" slices are named, not truncated."""
+    text = EXAMPLE.read_text(encoding="utf-8")
+    path = tmp_path / "bad.toml"
+    for old, new, msg in (
+        ("z_sun = 21", "z_sun = 21.5", r"bad\.toml \[gears\]\.z_sun: must be a whole number, got 21\.5"),
+        ("n_slices = 8", 'n_slices = "8"', r"bad\.toml \[model\]\.n_slices: must be a whole number, got '8'"),
+        ("n_periods = 20", "n_periods = 0", r"bad\.toml \[model\]\.n_periods: must be ≥ 1, got 0"),
+        ("carrier_speed_rpm = 22", "carrier_speed_rpm = 0", r"bad\.toml \[operation\]\.carrier_speed_rpm: must be > 0, got 0"),
+    ):
+        assert old in text
+        path.write_text(text.replace(old, new), encoding="utf-8")
+        with pytest.raises(ValueError, match=msg):
+            load_helical(path)
+    path.write_text(text.replace("z_sun = 21", "z_sun = 21.0"), encoding="utf-8")
+    assert load_helical(path).stage.z_sun == 21  # a float with no fractional part is a whole number
+
+
 def test_tip_relief_and_crowning_values():
     g_alpha, pbt = 48.0, 30.0
     default = g_alpha - pbt  # from the single/double-contact boundary to the tip

@@ -65,6 +65,21 @@ def test_every_public_name_resolves_and_is_declared_for_type_checkers():
         gearte.no_such_name  # noqa: B018
 
 
+def test_gearte_drives_exports_every_drive_and_the_helical_model_on_first_use():
+    import gearte.drives as drives
+
+    for name, cls in drives.DRIVES.items():  # every registered drive by its class name
+        assert getattr(drives, cls.__name__) is cls, name
+    # The helical names load with their modules (diffrax) on first use, and are the top-level ones.
+    assert "diffrax" not in fresh("import gearte.drives; " + LOADED.replace(repr(HEAVY), repr(("diffrax",))))
+    lazy = set(drives._LAZY)
+    assert lazy <= set(dir(drives))
+    for name in lazy | {"RVKHV", "RVResponse"}:
+        assert getattr(drives, name) is getattr(gearte, name), name
+    with pytest.raises(AttributeError, match="no_such_name"):
+        drives.no_such_name  # noqa: B018
+
+
 def test_kind_tables_of_the_first_checks_match_the_study_kinds():
     from gearte.cli.config import KIND_TABLES
     from gearte.cli.kinds import STUDY_KINDS

@@ -1,4 +1,11 @@
-"""Drive models: the protocol every drive implements, one file per drive, and the registry."""
+"""Drive models: the protocol every drive implements, one file per drive, and the registry.
+
+The helical dynamic model's names (`HelicalPlanetary` and its parts) load on first use: they import
+diffrax, which the kinematic drives do not need.
+"""
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from . import cycloid_pin as cycloid_pin, harmonic as harmonic, wang2013 as wang2013
 from .cycloid_pin import (
@@ -28,3 +35,42 @@ from .protocol import (
     Trace as Trace,
 )
 from .registry import DRIVES as DRIVES
+from .rv_khv import RVKHV as RVKHV, RVResponse as RVResponse
+
+if TYPE_CHECKING:
+    from .helical import DynamicResponse as DynamicResponse, HelicalPlanetary as HelicalPlanetary, load_helical as load_helical
+    from .helical_geometry import HelicalStage as HelicalStage
+    from .helical_modifications import StageModifications as StageModifications, ToothModification as ToothModification
+    from .helical_solve import PeriodicSolver as PeriodicSolver
+    from .helical_stiffness import (
+        AbstractStiffnessModel as AbstractStiffnessModel,
+        MeanStiffness as MeanStiffness,
+        SlicedStiffness as SlicedStiffness,
+        TransverseStiffness as TransverseStiffness,
+    )
+
+_LAZY = {
+    "DynamicResponse": ".helical",
+    "HelicalPlanetary": ".helical",
+    "load_helical": ".helical",
+    "HelicalStage": ".helical_geometry",
+    "StageModifications": ".helical_modifications",
+    "ToothModification": ".helical_modifications",
+    "PeriodicSolver": ".helical_solve",
+    "AbstractStiffnessModel": ".helical_stiffness",
+    "MeanStiffness": ".helical_stiffness",
+    "SlicedStiffness": ".helical_stiffness",
+    "TransverseStiffness": ".helical_stiffness",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+    globals()[name] = value  # the next access is a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ..core.units import ARCSEC_PER_RAD
-from ..core.validate import as_int
+from ..core.validate import as_float, as_int
 from .helical_equations import SUN, StageSystem, error_sources, stage_system
 from .helical_geometry import MEMBERS, HelicalStage, geometry
 from .helical_modifications import StageModifications, modifications_from_amounts
@@ -190,6 +190,15 @@ def _num(table: Mapping, key: str, where: str) -> float:
     return float(v)
 
 
+def _whole(table: Mapping, key: str, where: str, default: int | None = None) -> int:
+    """A whole number from a parameter file (the constructors check its range); ``default`` when absent."""
+    if key not in table and default is not None:
+        return default
+    if key not in table:
+        raise ValueError(f"{where}: missing key {key!r}")
+    return as_int(f"{where}.{key}", table[key], minimum=1)
+
+
 def _stiffness_model(model: Mapping, where: str) -> AbstractStiffnessModel:
     """The stiffness model named by the file's ``stiffness_model`` key (the models' `name`s; "slices" when absent)."""
     by_name = {cls.name: cls for cls in STIFFNESS_MODELS}
@@ -210,6 +219,9 @@ def load_helical(path: str | Path) -> HelicalPlanetary:
     mesh = _section(data, "mesh", w)
     op = _section(data, "operation", w)
     model = data.get("model", {})
+    gw, meshw, opw, mw = (f"{w} [{t}]" for t in ("gears", "mesh", "operation", "model"))
+    if not isinstance(model, Mapping):
+        raise ValueError(f"{mw}: expected a table, got {model!r}")
 
     def per_member(key):
         return [_num(_section(members, m, f"{w} [members]"), key, f"{w} [members.{m}]") for m in MEMBERS]
@@ -219,40 +231,41 @@ def load_helical(path: str | Path) -> HelicalPlanetary:
         t = _section(sup, m, f"{w} [supports]")
         stiff.append([_num(t, d, f"{w} [supports.{m}]") for d in _DIRS])
         zeta.append(_num(t, "damping_ratio", f"{w} [supports.{m}]"))
+    speed = as_float(f"{opw}.carrier_speed_rpm", _num(op, "carrier_speed_rpm", opw), positive=True)
     stage = HelicalStage(
-        int(_num(g, "z_sun", w)),
-        int(_num(g, "z_planet", w)),
-        int(_num(g, "z_ring", w)),
-        normal_module=_num(g, "normal_module_mm", w),
-        normal_pressure_angle=math.radians(_num(g, "normal_pressure_angle_deg", w)),
-        helix_angle=math.radians(_num(g, "helix_angle_deg", w)),
-        face_width=_num(g, "face_width_mm", w),
-        n_planets=int(_num(g, "n_planets", w)),
+        _whole(g, "z_sun", gw),
+        _whole(g, "z_planet", gw),
+        _whole(g, "z_ring", gw),
+        normal_module=_num(g, "normal_module_mm", gw),
+        normal_pressure_angle=math.radians(_num(g, "normal_pressure_angle_deg", gw)),
+        helix_angle=math.radians(_num(g, "helix_angle_deg", gw)),
+        face_width=_num(g, "face_width_mm", gw),
+        n_planets=_whole(g, "n_planets", gw),
         sun_hand=str(g.get("sun_hand", "right")),
         mass=per_member("mass_kg"),
         polar_inertia=per_member("polar_inertia_kgm2"),
         tilt_inertia=per_member("tilt_inertia_kgm2"),
         support_stiffness=stiff,
         support_damping_ratio=[[z] * 6 for z in zeta],
-        mesh_stiffness=[_num(mesh, "stiffness_external", w), _num(mesh, "stiffness_internal", w)],
-        mesh_damping_ratio=_num(mesh, "damping_ratio", w),
-        carrier_torque=_num(op, "power_kw", w) * 1e3 / (_num(op, "carrier_speed_rpm", w) * 2 * math.pi / 60),
-        carrier_speed=_num(op, "carrier_speed_rpm", w),
+        mesh_stiffness=[_num(mesh, "stiffness_external", meshw), _num(mesh, "stiffness_internal", meshw)],
+        mesh_damping_ratio=_num(mesh, "damping_ratio", meshw),
+        carrier_torque=_num(op, "power_kw", opw) * 1e3 / (speed * 2 * math.pi / 60),
+        carrier_speed=speed,
         lead_mismatch=[
-            _num(mesh, "lead_mismatch_external_um", w) if "lead_mismatch_external_um" in mesh else 0.0,
-            _num(mesh, "lead_mismatch_internal_um", w) if "lead_mismatch_internal_um" in mesh else 0.0,
+            _num(mesh, "lead_mismatch_external_um", meshw) if "lead_mismatch_external_um" in mesh else 0.0,
+            _num(mesh, "lead_mismatch_internal_um", meshw) if "lead_mismatch_internal_um" in mesh else 0.0,
         ],
     )
     solver = PeriodicSolver(
-        int(model.get("n_periods", 20)),
-        steps_per_period=int(model.get("steps_per_period", 256)),
-        samples_per_period=int(model.get("samples_per_period", 128)),
+        _whole(model, "n_periods", mw, 20),
+        steps_per_period=_whole(model, "steps_per_period", mw, 256),
+        samples_per_period=_whole(model, "samples_per_period", mw, 128),
     )
     return HelicalPlanetary(
         stage,
-        n_slices=int(model.get("n_slices", 8)),
-        stiffness_model=_stiffness_model(model, f"{w} [model]"),
-        contact_smoothing=float(model.get("contact_smoothing_um", 0.02)),
+        n_slices=_whole(model, "n_slices", mw, 8),
+        stiffness_model=_stiffness_model(model, mw),
+        contact_smoothing=_num(model, "contact_smoothing_um", mw) if "contact_smoothing_um" in model else 0.02,
         solver=solver,
     )
 
