@@ -89,6 +89,21 @@ def test_sliced_stiffness_has_the_iso_mean_and_the_spur_limit_alternates_single_
     np.testing.assert_allclose(np.mean(total > 1.5), float(g.contact_ratio[0]) - 1, atol=0.05)
 
 
+@pytest.mark.parametrize("n_slices", [1, 3, 8, 40])
+def test_pair_range_holds_every_pair_that_is_ever_on_the_path(model, n_slices):
+    """`pair_range` is tight: with three more pairs on each side the extra pairs never carry weight,
+    and each pair of the range does at some time (the range is no wider than it must be)."""
+    st = model.stage
+    g = geometry(st)
+    lo, hi = pair_range(g, float(st.face_width), n_slices)
+    wide = SlicedMeshes(st, g, StageModifications(), None, n_slices=n_slices, pairs=(lo - 3, hi + 3))
+    taus = jnp.linspace(0.0, 1.0, 4001)
+    _, w = eqx.filter_jit(lambda e, t: jax.vmap(e.positions)(t))(wide, taus)
+    w = np.asarray(w)  # (T, meshes, slices, pairs lo − 3 … hi + 2)
+    assert not w[..., :3].any() and not w[..., -3:].any()
+    assert (w[..., 3:-3].max(axis=(0, 1, 2)) > 0).all()
+
+
 def test_stiffness_models_lead_shifted_in_phase_and_constant(model):
     """`SlicedStiffness`: slice k runs (z_k − z_0) tan β_b / p_bt mesh periods ahead of slice 0.
     `TransverseStiffness`: every slice in phase, exactly the sliced pairs with the lead shift removed (what

@@ -65,8 +65,14 @@ class MeshedSystem(eqx.Module):
         ell = self.contact_smoothing
         x = (self.projection @ q)[:, None] + gap
         xd = (self.projection @ v)[:, None] + gap_dot
-        elastic = self.pair_stiffness[:, None] * w * ell * jax.nn.softplus(x / ell)
-        viscous = self.pair_damping[:, None] * w * jax.nn.sigmoid(x / ell) * xd
+        # softplus(z) and its derivative sigmoid(z) from one exponential, e = exp(−|z|) ≤ 1 (no overflow):
+        # softplus = max(z, 0) + log1p(e), sigmoid = 1/(1 + e) for z ≥ 0 and e/(1 + e) below.
+        z = x / ell
+        e = jnp.exp(-jnp.abs(z))
+        softplus = jnp.maximum(z, 0.0) + jnp.log1p(e)
+        sigmoid = jnp.where(z >= 0.0, 1.0, e) / (1.0 + e)
+        elastic = self.pair_stiffness[:, None] * w * ell * softplus
+        viscous = self.pair_damping[:, None] * w * sigmoid * xd
         return elastic + viscous
 
     def vector_field(self, tau, y, args=None):

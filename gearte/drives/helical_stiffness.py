@@ -57,12 +57,17 @@ def contact_fraction(u, half_span, path_length):
 
 
 def pair_range(geom: Geometry, face_width: float, n_slices: int) -> tuple[int, int]:
-    """Tooth-pair indices j (lo, hi) that cover the path of contact and the slice spans (concrete geometry)."""
+    """Tooth-pair indices j (lo, hi) that can be on the path of contact of some slice (concrete geometry).
+
+    Pair j of a slice sits at u = b − j p_bt, b ∈ [0, p_bt) (`SlicedMeshes`), and has weight only while
+    u ∈ (−s, g + s), s = the slice's half span: so j > −(g + s)/p_bt and j < 1 + s/p_bt. The other pairs
+    would always have weight 0 and only cost evaluations of the contact law.
+    """
     pbt = float(geom.base_pitch)
-    w = float(face_width) / n_slices * math.tan(float(geom.base_helix_angle))
+    s = max(float(face_width) / n_slices * math.tan(float(geom.base_helix_angle)), 1e-3 * pbt) / 2  # SlicedMeshes.half_span
     g = float(jnp.max(geom.path_length))
-    lo = -math.ceil(w / (2 * pbt)) - 1
-    hi = math.ceil((g + w / 2) / pbt) + 2
+    lo = math.floor(-(g + s) / pbt) + 1
+    hi = math.ceil(1 + s / pbt)
     return lo, hi
 
 
