@@ -50,8 +50,13 @@ def versions() -> dict:
 
 
 def sample_errors(study: Study, index: int) -> dict:
-    """The errors of sample `index` of `study`, regenerated from its key."""
-    return study.errors.sample(jax.random.fold_in(as_key(study.seed), index))
+    """The errors of sample `index` of `study`, regenerated from its key (one compiled program, as in the run)."""
+    return _sample_jit(study.errors, as_key(study.seed), np.uint32(index))
+
+
+@equinox.filter_jit
+def _sample_jit(errors: ErrorModel, key, index):
+    return errors.sample(jax.random.fold_in(key, index))
 
 
 class RunContext(AbstractStudyContext):

@@ -318,8 +318,8 @@ class AbstractSinusoidalDrive(AbstractDrive):
         )
 
     def trace(self, errors: Errors) -> Trace:
-        signal = self.signal(errors)
-        ext = self.extrema(signal)
+        # Two compiled programs (the persistent compilation cache keeps them), not dozens of eager operations.
+        signal, ext = _signal_and_extrema(self, errors)
         revs = float(signal.hyper_period_revs)
         top_order = max(signal.orders) if signal.orders else 1
         npts = int(min(200_000, max(4000, 40 * top_order)))
@@ -328,7 +328,7 @@ class AbstractSinusoidalDrive(AbstractDrive):
         lines = [("0 (constant)", float(signal.offset))] + [(str(f), float(a)) for f, a in zip(signal.frequencies, amp)]
         return Trace(
             theta=theta,
-            te=np.asarray(evaluate(signal, theta)),
+            te=np.asarray(_evaluate_jit(signal, theta)),
             span_revs=str(signal.hyper_period_revs),
             max=float(ext.max),
             min=float(ext.min),
@@ -365,3 +365,12 @@ class AbstractGridDrive(AbstractDrive):
 def sample_key(key: PRNGKeyArray, index) -> PRNGKeyArray:
     """The key of sample `index` of a study keyed by `key` (``fold_in``)."""
     return jax.random.fold_in(key, index)
+
+
+@eqx.filter_jit
+def _signal_and_extrema(drive: AbstractSinusoidalDrive, errors: Errors) -> tuple[TESignal, Extrema]:
+    signal = drive.signal(errors)
+    return signal, drive.extrema(signal)
+
+
+_evaluate_jit = eqx.filter_jit(evaluate)

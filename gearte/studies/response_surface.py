@@ -29,7 +29,6 @@ from typing import Any, Literal
 
 import equinox as eqx
 import numpy as np
-from scipy.linalg import solve_triangular
 
 from .doe import Variable, check_variables, to_coded, to_natural
 
@@ -303,6 +302,8 @@ def fit_response_surface(x, y, *, variables: Sequence[Variable] | None = None) -
             "use a design made for it (CentralComposite, BoxBehnken, FullFactorial(levels=3)) or more runs"
         )
     Q, R = np.linalg.qr(X)
+    from scipy.linalg import solve_triangular  # imported here: a study that fits no surface does not load SciPy
+
     eta = solve_triangular(R, Q.T @ y)
     fitted = X @ eta
     e = y - fitted
