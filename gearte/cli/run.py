@@ -258,6 +258,34 @@ def _monte_carlo_streamed(study: Study, sampler: _RunSample, tmp: Path, *, progr
     return mc, stats, acc.sample_near(stats.percentiles["50"]), summary, acc.histogram(80)
 
 
+class _TraceWarmUp:
+    """Loads the programs of the report's TE trace (a sinusoidal drive's: cheap) in a background thread once the
+    Monte Carlo's first chunk is back, i.e. while the devices compute the others (XLA releases the GIL): the trace
+    of the typical sample then runs the programs already loaded. Only a warm-up: a failure here is left to the
+    real call to report."""
+
+    def __init__(self, study: Study):
+        self.study = study
+        self.wanted = isinstance(study.drive, AbstractSinusoidalDrive)
+        self.thread: threading.Thread | None = None
+
+    def on_chunk(self, start: int, values) -> None:
+        del start, values
+        if self.thread is None:
+            self.thread = threading.Thread(target=self._warm, daemon=True)
+            self.thread.start()
+
+    def _warm(self) -> None:
+        try:
+            self.study.drive.trace(sample_errors(self.study, 0))
+        except Exception:  # a warm-up only: the real call reports any error
+            pass
+
+    def join(self) -> None:
+        if self.thread is not None:
+            self.thread.join()
+
+
 def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None, keep_samples: bool = False) -> dict:
     t_start = time.perf_counter()
     # The plots' library loads in the background while the Monte Carlo computes (XLA releases the GIL).
@@ -280,7 +308,17 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
         values = values_rad = None
         outputs: dict = {}
     else:
-        mc = monte_carlo(sampler, key=study.seed, n_samples=study.samples, chunk_size=study.chunk_size, progress=progress, desc=study.name)
+        warm = _TraceWarmUp(study)
+        mc = monte_carlo(
+            sampler,
+            key=study.seed,
+            n_samples=study.samples,
+            chunk_size=study.chunk_size,
+            progress=progress,
+            desc=study.name,
+            on_chunk=warm.on_chunk if warm.wanted else None,
+        )
+        warm.join()
         values_rad, outputs = mc.values
         values = angle_from_rad(values_rad, study.unit) if angle else values_rad
         stats = statistics(values, unit=unit)
