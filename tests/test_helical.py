@@ -9,19 +9,22 @@ at its small size: they run on one worker (conftest.py) and share the compiled s
 import math
 from typing import ClassVar
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from gearte import AbstractStiffnessModel, MeanStiffness, SlicedStiffness, TransverseStiffness
 from gearte.core.signal import evaluate
 from gearte.drives.helical import EXAMPLE, HelicalPlanetary, load_helical, wind_turbine_report
 from gearte.drives.helical_equations import MeshedSystem, loa_errors, stage_system
 from gearte.drives.helical_geometry import geometry, iso6336_mesh_stiffness
-from gearte.drives.helical_modifications import StageModifications, ToothModification, crowning, flank_pair_relief
-from gearte.drives.helical_solve import PeriodicSolver, solve_periodic
+from gearte.drives.helical_modifications import PathRelief, StageModifications, ToothModification, crowning, flank_pair_relief
+from gearte.drives.helical_solve import PeriodicSolver, UnrolledExplicitRK, solve_periodic
 from gearte.drives.helical_stiffness import SlicedMeshes, pair_range, slice_centres
 from gearte.drives.planetary_2kh import Planetary2KH
 from gearte.drives.protocol import Eccentricity
@@ -202,6 +205,58 @@ def test_tip_relief_and_crowning_values():
     np.testing.assert_allclose(crowning(lin, none, jnp.asarray([-115.0, 0.0, 57.5]), 230.0), [12.0, 0.0, 3.0])
 
 
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    amounts=st.lists(st.floats(0.0, 60.0), min_size=8, max_size=8),
+    lengths=st.lists(st.one_of(st.none(), st.floats(0.5, 20.0)), min_size=8, max_size=8),
+    shapes=st.lists(st.sampled_from(["linear", "parabolic"]), min_size=2, max_size=2),
+)
+def test_path_relief_of_all_meshes_at_once_is_flank_pair_relief_of_each(amounts, lengths, shapes):
+    """`PathRelief` (what `SlicedMeshes` evaluates) against `flank_pair_relief` (the definition), mesh by mesh, for
+    tip and root reliefs of either shape and length (None: from the single/double-contact boundary)."""
+    pbt = 30.0
+    path = jnp.asarray([48.0, 55.0, 41.0])
+
+    def tooth(i, shape):
+        return ToothModification(
+            amounts[i], tip_relief_length=lengths[i], root_relief=amounts[i + 1], root_relief_length=lengths[i + 1], shape=shape
+        )
+
+    a, b, c = tooth(0, shapes[0]), tooth(2, shapes[1]), tooth(4, shapes[0])
+    flanks = [(a, b), (b, c), (c, a)]
+    u = jnp.linspace(-5.0, 60.0, 53)[None, :] * jnp.ones((3, 1))
+    got = PathRelief(flanks, path, pbt)(u, path)
+    for m, (first, last) in enumerate(flanks):
+        np.testing.assert_allclose(got[m], flank_pair_relief(first, last, u[m], path[m], pbt), rtol=1e-13, atol=1e-12)
+
+
+def test_unrolled_runge_kutta_is_diffrax_own_step_to_rounding():
+    """`UnrolledExplicitRK` with a diffrax tableau takes the same steps as diffrax's solver of that tableau (Tsit5 and
+    Dopri5 first-same-as-last, Heun not), on the forced oscillator over two periods; an implicit tableau is refused."""
+    sys = _oscillator()
+    y0 = jnp.asarray([LOAD, 0.0])
+
+    def run(method):
+        ys = diffrax.diffeqsolve(
+            diffrax.ODETerm(sys.vector_field),
+            method,
+            t0=0.0,
+            t1=2.0,
+            dt0=1.0 / 64,
+            y0=y0,
+            saveat=diffrax.SaveAt(ts=jnp.linspace(0.0, 2.0, 9)),
+            stepsize_controller=diffrax.ConstantStepSize(),
+        ).ys
+        assert ys is not None
+        return np.asarray(ys)
+
+    for ref in (diffrax.Tsit5, diffrax.Dopri5, diffrax.Heun):
+        np.testing.assert_allclose(run(UnrolledExplicitRK(ref)), run(ref()), rtol=1e-13, atol=1e-12)
+        assert UnrolledExplicitRK(ref).order(None) == ref().order(None)
+    with pytest.raises(ValueError, match="explicit"):
+        UnrolledExplicitRK(diffrax.Kvaerno3)  # pyright: ignore[reportArgumentType]
+
+
 def test_eccentricities_are_the_kinematic_models_errors_on_the_lines_of_action(model):
     """With rigid meshes, e_s + e_r of planet 1 turns the sun by Planetary2KH's TE (same sources, phases, frequencies)."""
     st = model.stage
@@ -284,6 +339,41 @@ def test_solution_converges_at_the_fifth_order_of_tsit5():
 
 
 # ---------------------------------------------------------------- the stage
+
+
+def test_contact_law_is_a_smooth_max_within_its_stated_error():
+    """One pair of unit stiffness and weight (k w = 1): its elastic force is max_ℓ(x) with 0 < max_ℓ(x) − max(0, x) ≤ ℓ,
+    = ℓ at x = 0, ≤ 2ℓ⁴/|x|³; its viscous force per unit speed is dmax_ℓ/dx (the same law's slope, checked against
+    jax.grad of the elastic force), in [0, 1], ½ at x = 0."""
+    ell = 0.02
+    x = np.concatenate([-np.geomspace(1e-4, 100.0, 60)[::-1], [0.0], np.geomspace(1e-4, 100.0, 60)])
+
+    def pair(xx, damping):
+        s = MeshedSystem(
+            mass=jnp.ones(1),
+            stiffness=jnp.zeros((1, 1)),
+            damping=jnp.zeros((1, 1)),
+            load=jnp.zeros(1),
+            projection=jnp.ones((1, 1)),
+            pair_stiffness=jnp.asarray([1.0 - damping]),
+            pair_damping=jnp.asarray([damping]),
+            excitation=lambda tau: (jnp.zeros((1, 1)), jnp.ones((1, 1))),
+            contact_smoothing=jnp.asarray(ell),
+        )
+        return s.pair_forces(jnp.asarray(0.0), jnp.reshape(xx, (1,)), jnp.ones(1))[0, 0]
+
+    elastic = np.asarray(jax.vmap(lambda xx: pair(xx, 0.0))(jnp.asarray(x)))
+    slope = np.asarray(jax.vmap(lambda xx: pair(xx, 1.0))(jnp.asarray(x)))
+    err = elastic - np.maximum(x, 0.0)
+    assert np.all(err > 0) and np.all(err <= ell * (1 + 1e-15))
+    assert err[60] == pytest.approx(ell, rel=1e-15)
+    far = np.abs(x) > 0
+    assert np.all(err[far] <= 2 * ell**4 / np.abs(x[far]) ** 3 + 8 * np.finfo(float).eps * np.abs(x[far]))  # + rounding of x
+    assert err[-1] < 1e-12 and np.all(np.diff(elastic) > 0)  # 3e-12 µm at 40 µm; increasing
+    np.testing.assert_allclose(
+        slope, np.asarray(jax.vmap(jax.grad(lambda xx: pair(xx, 0.0)))(jnp.asarray(x))), rtol=1e-12, atol=1e-13
+    )  # ½(1 + z³/r³) cancels where x ≪ 0
+    assert np.all((slope >= 0) & (slope <= 1)) and slope[60] == pytest.approx(0.5, rel=1e-15)
 
 
 def test_constant_stiffness_and_no_excitation_give_no_fluctuation(model, response):

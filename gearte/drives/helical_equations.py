@@ -15,10 +15,14 @@ carrier; its centripetal and gyroscopic terms (ω_c² a ≈ 2 m/s² at 22 rpm, a
 
 Damping: each support spring has c = 2ζ√(k m_eff), m_eff = 1/(gᵀM⁻¹g) the mass it sees; each mesh
 c = 2ζ_m √(k̄ m_eff) with its mean stiffness k̄, shared by its pairs in proportion to their stiffness.
-The mesh force of a pair is k w max_ℓ(x) + c w σ(x/ℓ) ẋ with x = gᵀq + gap the compression,
-w the contact weight, and max_ℓ(x) = ℓ log(1 + e^{x/ℓ}) a smooth max(0, x) (ℓ = `contact_smoothing`, µm):
-unilateral contact (a relieved or crowned pair that lifts off carries nothing), infinitely
-differentiable, so the integrator keeps its order and gradients stay finite; its error is below ℓ ln 2.
+The mesh force of a pair is k w max_ℓ(x) + c w max_ℓ′(x) ẋ with x = gᵀq + gap the compression,
+w the contact weight, and max_ℓ(x) = ½(x + (x⁴ + 16ℓ⁴)^¼) a smooth max(0, x) (ℓ = `contact_smoothing`,
+µm): unilateral contact (a relieved or crowned pair that lifts off carries nothing), convex and
+infinitely differentiable, so the integrator keeps its order and gradients stay finite. Its error
+max_ℓ(x) − max(0, x) is ℓ at x = 0 and at most 2ℓ⁴/|x|³ elsewhere (3e-12 µm for a pair compressed by
+40 µm at ℓ = 0.02 µm); it costs two square roots, where the softplus ℓ log(1 + e^{x/ℓ}) cost an
+exponential and a logarithm, 2.5 × as much on the CPU (fluctuations of the example agree with the
+softplus law's within 2.3e-4 µm, a tenth of the integration error).
 """
 
 from __future__ import annotations
@@ -65,14 +69,16 @@ class MeshedSystem(eqx.Module):
         ell = self.contact_smoothing
         x = (self.projection @ q)[:, None] + gap
         xd = (self.projection @ v)[:, None] + gap_dot
-        # softplus(z) and its derivative sigmoid(z) from one exponential, e = exp(−|z|) ≤ 1 (no overflow):
-        # softplus = max(z, 0) + log1p(e), sigmoid = 1/(1 + e) for z ≥ 0 and e/(1 + e) below.
+        # max_ℓ(x) = ½(x + (x⁴ + 16ℓ⁴)^¼) and its derivative ½(1 + x³/(x⁴ + 16ℓ⁴)^¾), from two square roots
+        # (an exponential and a logarithm cost 2.5 × as much here); z = x/ℓ.
         z = x / ell
-        e = jnp.exp(-jnp.abs(z))
-        softplus = jnp.maximum(z, 0.0) + jnp.log1p(e)
-        sigmoid = jnp.where(z >= 0.0, 1.0, e) / (1.0 + e)
-        elastic = self.pair_stiffness[:, None] * w * ell * softplus
-        viscous = self.pair_damping[:, None] * w * sigmoid * xd
+        z2 = z * z
+        r2 = jnp.sqrt(z2 * z2 + 16.0)
+        r = jnp.sqrt(r2)
+        smooth_max = 0.5 * (z + r)
+        slope = 0.5 * (1.0 + z * z2 / (r * r2))
+        elastic = self.pair_stiffness[:, None] * w * ell * smooth_max
+        viscous = self.pair_damping[:, None] * w * slope * xd
         return elastic + viscous
 
     def vector_field(self, tau, y, args=None):

@@ -141,6 +141,47 @@ def flank_pair_relief(first: ToothModification, last: ToothModification, u, path
     )
 
 
+class PathRelief(eqx.Module):
+    """The four profile reliefs of the pairs of each of M meshes (`flank_pair_relief`) as arrays, for evaluating all
+    meshes at once: term t of mesh m removes `amount[m, t]` µm at its end of the path, falling over `length[m, t]` mm
+    as ((L − d)/L)^e, e = 1 + `square[m, t]`; terms 0 and 1 (the first gear's tip, the last gear's root) are measured
+    from the start of the path, terms 2 and 3 (the last gear's tip, the first gear's root) from its end."""
+
+    amount: Float[Array, "m 4"]
+    length: Float[Array, "m 4"]
+    inverse_length: Float[Array, "m 4"]
+    square: Float[Array, "m 4"]
+
+    def __init__(self, flanks, path_length, base_pitch):
+        """`flanks`: a (first, last) pair of `ToothModification`s per mesh; `path_length` (M,), mm; `base_pitch`, mm."""
+        amount, length, square = [], [], []
+        for (first, last), g in zip(flanks, path_length, strict=True):
+            default = jnp.maximum(g - base_pitch, 1e-3 * base_pitch)
+            terms = (
+                (first.tip_relief, first.tip_relief_length, first.exponent),
+                (last.root_relief, last.root_relief_length, last.exponent),
+                (last.tip_relief, last.tip_relief_length, last.exponent),
+                (first.root_relief, first.root_relief_length, first.exponent),
+            )
+            amount.append(jnp.stack([jnp.asarray(a, dtype=float) for a, _, _ in terms]))
+            length.append(jnp.stack([jnp.where(jnp.isnan(n), default, n) for _, n, _ in terms]))
+            square.append(jnp.asarray([float(e - 1) for _, _, e in terms]))
+        self.amount, self.length, self.square = jnp.stack(amount), jnp.stack(length), jnp.stack(square)
+        self.inverse_length = 1.0 / self.length
+
+    def __call__(self, u, path_length) -> Float[Array, "m ..."]:
+        """Relief (µm) of pairs at positions `u` (M, …) mm on paths of contact of length `path_length` (M,)."""
+        shape = (u.shape[0],) + (1,) * (u.ndim - 1)
+        g = jnp.reshape(path_length, shape)
+        out = jnp.zeros_like(u)
+        for term, d in enumerate((u, u, g - u, g - u)):
+            col = [jnp.reshape(a[:, term], shape) for a in (self.amount, self.length, self.inverse_length, self.square)]
+            amount, length, inverse, square = col
+            t = jnp.maximum(length - d, 0.0) * inverse
+            out = out + amount * t * (1.0 + square * (t - 1.0))
+        return out
+
+
 def crowning(first: ToothModification, last: ToothModification, z, face_width):
     """Lead crowning (µm) of the pair at axial position `z` (mm from mid face) for face width `face_width` (mm)."""
     return (first.crowning + last.crowning) * (2.0 * z / face_width) ** 2

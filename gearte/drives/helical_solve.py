@@ -10,6 +10,12 @@ matches finite differences of the same computation. Zhang, Chen & Wang used a va
 Runge-Kutta method; `steps_per_period` is checked by convergence (tests: the error falls at the
 5th order of Tsit5).
 
+The settling periods take diffrax's own Tsit5 tableau through `UnrolledExplicitRK(diffrax.Tsit5)`, a
+diffrax solver whose stages are unrolled when traced, where diffrax's generic Runge-Kutta step loops
+over the tableau's rows: on the wind-turbine example a solve takes 0.075-0.080 s instead of 0.09 s
+and its reverse-mode gradient 0.45 s instead of 0.57 s (2 cores). Same tableau, same steps: the two
+agree to rounding (tested). The kept window uses `diffrax.Tsit5` itself for its 5th-order dense interpolant.
+
 Steady state: start from the quasi-static solution at τ = 0 (every mesh loaded, so only the
 mesh-stiffness and error excitation is left to decay), integrate `n_periods` mesh periods, and
 keep the last one. Why not shooting for the periodic orbit (optimistix root find of the period map):
@@ -20,6 +26,8 @@ is returned (`periodicity`, µm) so a caller can check the transient has gone.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import diffrax
 import equinox as eqx
 import jax
@@ -29,6 +37,75 @@ from jaxtyping import Array, Float
 
 from ..core.validate import as_int
 from .helical_equations import MeshedSystem
+
+
+class UnrolledExplicitRK(diffrax.AbstractSolver):
+    """The Butcher tableau of a diffrax explicit Runge-Kutta solver, its stages unrolled when traced.
+
+    For constant steps (`diffrax.ConstantStepSize`; no error estimate, linear dense output between steps) on an
+    `ODETerm`. A first-same-as-last method (Tsit5, Dopri5) carries the last stage's vector field to the next step, so
+    a step costs one evaluation fewer than it has stages.
+
+    **Arguments:**
+
+    - `method`: the diffrax solver class whose `tableau` and `order` are taken (a subclass of `diffrax.AbstractERK`;
+      default `diffrax.Tsit5`).
+    """
+
+    method: type[diffrax.AbstractERK] = eqx.field(static=True, default=diffrax.Tsit5)
+    term_structure: ClassVar = diffrax.AbstractTerm
+    interpolation_cls: ClassVar = diffrax.LocalLinearInterpolation
+
+    def __check_init__(self):
+        if not (isinstance(self.method, type) and issubclass(self.method, diffrax.AbstractERK)):
+            raise ValueError(
+                f"UnrolledExplicitRK: method must be an explicit Runge-Kutta solver class of diffrax (a diffrax.AbstractERK), got {self.method!r}"
+            )
+        tab = self.method.tableau
+        if not isinstance(tab, diffrax.ButcherTableau):
+            raise ValueError(f"UnrolledExplicitRK: {self.method.__name__} has no single Butcher tableau")
+        if tab.fsal and not tab.ssal:
+            raise ValueError("UnrolledExplicitRK: a first-same-as-last tableau must have its last stage at the solution")
+
+    @property
+    def tableau(self) -> diffrax.ButcherTableau:
+        tab = self.method.tableau
+        assert isinstance(tab, diffrax.ButcherTableau)  # __check_init__
+        return tab
+
+    def order(self, terms):
+        return self.method().order(terms)
+
+    def init(self, terms, t0, t1, y0, args):
+        del t1
+        return terms.vf(t0, y0, args) if self.tableau.fsal else None
+
+    def func(self, terms, t0, y0, args):
+        return terms.vf(t0, y0, args)
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        tab = self.tableau
+        h = terms.contr(t0, t1)
+        if tab.fsal and made_jump is False:
+            k0 = solver_state
+        elif tab.fsal:
+            k0 = jax.lax.cond(made_jump, lambda: terms.vf(t0, y0, args), lambda: solver_state)
+        else:
+            k0 = terms.vf(t0, y0, args)
+        ks = [k0]
+
+        def combine(weights):
+            incr = [(float(w), k) for w, k in zip(weights, ks, strict=False) if float(w) != 0.0]
+            return jax.tree.map(lambda y, *kk: y + h * sum(w * k for (w, _), k in zip(incr, kk, strict=True)), y0, *[k for _, k in incr])
+
+        # Stages 2…s; where the last stage is the solution itself (`ssal`: its row is b_sol), it is not evaluated here
+        # (a first-same-as-last tableau evaluates it below, as the next step's first stage).
+        rows = list(zip(tab.c, tab.a_lower, strict=True))
+        for ci, row in rows[:-1] if tab.ssal else rows:
+            ks.append(terms.vf(t0 + float(ci) * h, combine(row), args))
+        y1 = combine(tab.a_lower[-1] if tab.ssal else tab.b_sol)
+        state = terms.vf(t1, y1, args) if tab.fsal else None
+        return y1, None, dict(y0=y0, y1=y1), state, diffrax.RESULTS.successful
 
 
 class PeriodicSolver(eqx.Module):
@@ -81,11 +158,11 @@ def solve_periodic(system: MeshedSystem, solver: PeriodicSolver, *, y0: Float[Ar
     # checks of save times and of the result (host callbacks, which JAX's persistent compilation cache does
     # not store: every new process would compile the solve again). Constant steps with max_steps above their
     # number cannot fail; a non-finite state shows as NaN in `periodicity`.
-    def integrate(t0: float, t1: float, y: Float[Array, " n"], saveat: diffrax.SaveAt) -> diffrax.Solution:
+    def integrate(t0: float, t1: float, y: Float[Array, " n"], saveat: diffrax.SaveAt, method: diffrax.AbstractSolver) -> diffrax.Solution:
         n_steps = round((t1 - t0) * steps) + 16
         return diffrax.diffeqsolve(
             diffrax.ODETerm(system.vector_field),
-            diffrax.Tsit5(),
+            method,
             t0=t0,
             t1=t1,
             dt0=1.0 / steps,
@@ -97,9 +174,9 @@ def solve_periodic(system: MeshedSystem, solver: PeriodicSolver, *, y0: Float[Ar
             throw=False,
         )
 
-    settle = integrate(0.0, t_start, y0, diffrax.SaveAt(t1=True))
+    settle = integrate(0.0, t_start, y0, diffrax.SaveAt(t1=True), UnrolledExplicitRK(diffrax.Tsit5))
     assert settle.ys is not None
-    window = integrate(t_start, float(n), settle.ys[-1], diffrax.SaveAt(dense=True))
+    window = integrate(t_start, float(n), settle.ys[-1], diffrax.SaveAt(dense=True), diffrax.Tsit5())
     ts = t_start + np.arange(rec * s + 1, dtype=float) / s
     ys = jax.vmap(window.evaluate)(jnp.asarray(ts))
     ok = (settle.result == diffrax.RESULTS.successful) & (window.result == diffrax.RESULTS.successful)

@@ -40,7 +40,7 @@ else:
     from equinox import AbstractClassVar
 
 from .helical_geometry import Geometry, HelicalStage, lead_mismatch_gap, mesh_phases
-from .helical_modifications import StageModifications, crowning, flank_pair_relief
+from .helical_modifications import PathRelief, StageModifications, crowning
 
 
 def slice_centres(face_width, n_slices: int) -> Float[Array, " k"]:
@@ -164,6 +164,7 @@ class SlicedMeshes(eqx.Module):
     crowning: Float[Array, "m k"]
     mismatch: Float[Array, "m k"]
     modifications: StageModifications
+    relief: PathRelief
     errors: Callable[[Array], Array] | None
     stiffness_model: AbstractStiffnessModel
     n_planets: int = eqx.field(static=True)
@@ -200,6 +201,9 @@ class SlicedMeshes(eqx.Module):
         mismatch = lead_mismatch_gap(stage.lead_mismatch[:, None], z[None, :], stage.face_width)  # (2, K)
         self.mismatch = jnp.concatenate([jnp.broadcast_to(mismatch[0], (n, n_slices)), jnp.broadcast_to(mismatch[1], (n, n_slices))])
         self.modifications = modifications
+        # The profile reliefs of every mesh as arrays (`flank_pair_relief` of each mesh's flanks, all meshes at once).
+        flanks = [(m.sun, m.planet_sun_flank)] * n + [(m.planet_ring_flank, m.ring)] * n
+        self.relief = PathRelief(flanks, self.path_length, geom.base_pitch)
         self.errors = errors
         self.n_planets, self.n_slices, self.pairs = n, n_slices, pairs
 
@@ -210,16 +214,7 @@ class SlicedMeshes(eqx.Module):
 
     def __call__(self, tau) -> tuple[Float[Array, "s j"], Float[Array, "s j"]]:
         u, w = self.positions(tau)
-        n, m = self.n_planets, self.modifications
-        pbt = self.base_pitch
-        g = self.path_length[:, None, None]
-        relief = jnp.concatenate(
-            [
-                flank_pair_relief(m.sun, m.planet_sun_flank, u[:n], g[:n], pbt),
-                flank_pair_relief(m.planet_ring_flank, m.ring, u[n:], g[n:], pbt),
-            ]
-        )
-        h = relief + self.crowning[..., None]
+        h = self.relief(u, self.path_length) + self.crowning[..., None]
         gap = self.mismatch[..., None] - h
         if self.errors is not None:
             gap = gap + self.errors(tau)[:, None, None]

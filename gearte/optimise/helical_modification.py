@@ -319,7 +319,7 @@ def optimise_modifications(
     smooth: float = 0.02,
     rtol: float = 1e-4,
     atol: float = 1e-3,
-    max_steps: int = 40,
+    max_steps: int = 100,
     throw: bool = True,
 ) -> ModificationSolution:
     """Minimise w_ext·f_ext + w_int·f_int, the smooth DTE fluctuations of planet 1's meshes
@@ -338,8 +338,10 @@ def optimise_modifications(
     - `weights`: (w_ext, w_int).
     - `smooth`: width of `smooth_peak_to_peak`, µm (the objective is at most 2·smooth·log S above the sampled one).
     - `rtol`, `atol`: BFGS's Cauchy termination on z and on the objective (µm).
-    - `max_steps`: BFGS steps at most (a run-time value: up to 64, and within each power of two beyond, a new
-      limit reuses the compiled solve).
+    - `max_steps`: BFGS steps at most, rejected line-search trials included (a run-time value: up to 64, and within
+      each power of two beyond, a new limit reuses the compiled solve). The objective is the smoothed maximum over
+      samples, whose leading sample changes along the way: the example takes 19 steps, the tests' coarse 4-slice
+      model 69.
     - `throw`: raise if the solve did not succeed (else inspect `result`).
 
     **Returns:** a `ModificationSolution`.
