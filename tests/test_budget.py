@@ -5,6 +5,7 @@ import json
 import math
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -16,6 +17,7 @@ import gearte
 from gearte import ConfigError, budget_problem, cli, contributions, optimise_budget, smooth_quantile, uniform_scaling
 from gearte.cli.config import load_study
 from gearte.drives import ExplicitDrive, ExplicitTerm
+from gearte.optimise.budget import _tight_tolerances_jit, common_draws
 
 ROOT = Path(__file__).resolve().parents[1]
 GAIN = 1e-5
@@ -139,6 +141,19 @@ def test_optimised_budget_is_cheaper_and_meets_the_yield_on_a_fresh_seed():
     # Fresh seed, independent of everything above: a plain Monte Carlo study at the found tolerances.
     x = te_samples(p, r.tolerances, 99, 40_000)
     assert np.mean(x <= float(p.constraints[0].spec)) >= 0.99 - 3 * math.sqrt(0.99 * 0.01 / 40_000)
+
+
+def test_sources_keep_their_order_inside_compiled_functions():
+    """The optimiser's y is built outside `jit` in `p.names` order and read inside; a dict comes back from `jit` with
+    its keys sorted, so the order must not come from one. With the sources given as (b, a) and unequal nominal
+    tolerances, the tight tolerances along y = log(nominal) are the nominal ones scaled alike."""
+    q = two_source_problem()
+    costs = {"b": gearte.Reciprocal(0.0, 40.0), "a": gearte.Reciprocal(0.0, 10.0)}
+    p = budget_problem(q.drive, q.model, costs=costs, nominal={"b": 10.0, "a": 2.0}, spec=20 * GAIN, statistic=gearte.Yield(0.99))
+    assert p.names == ["b", "a"] and eqx.filter_jit(lambda p: jnp.asarray([len(n) for n in p.names]))(p).shape == (2,)
+    draws = common_draws(p, jax.random.PRNGKey(0), 256)
+    tight = _tight_tolerances_jit(p, jnp.log(jnp.asarray([10.0, 2.0])), draws)
+    assert float(tight["b"]) / 10.0 == pytest.approx(float(tight["a"]) / 2.0, rel=1e-12)
 
 
 def test_bad_budget_inputs():

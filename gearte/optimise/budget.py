@@ -83,11 +83,15 @@ class BudgetProblem(eqx.Module):
     minimum: dict[str, Array]
     constraints: tuple[Constraint, ...]
     width: Float[Array, ""]  # relative to the mean of each metric
+    # The order of the budgeted sources, static: a dict field comes back from `jit` with its keys sorted, so an
+    # order taken from `costs` would differ inside and outside a compiled function (and the components of the
+    # optimiser's y, built outside, would be read as other sources inside).
+    order: tuple[str, ...] = eqx.field(static=True)
 
     @property
     def names(self) -> list[str]:
-        """The budgeted sources."""
-        return list(self.costs)
+        """The budgeted sources, in the order given (the components of the optimiser's y), inside `jit` as outside."""
+        return list(self.order)
 
     @property
     def homogeneous(self) -> bool:
@@ -200,6 +204,7 @@ def budget_problem(
         minimum={n: jnp.asarray(minimum[n]) for n in names},
         constraints=constraints,
         width=jnp.asarray(w),
+        order=tuple(names),
     )
 
 
