@@ -430,8 +430,15 @@ def _calibrate_and_verify(
         x = np.asarray(run(at(1.0), cal))
         lo = min(float(c.spec) / _exact_stat(c, x[j], n_check) for j, c in enumerate(p.constraints))
     else:
-        lo, hi = 1e-3, 1e3
-        for _ in range(36):  # bisection in log scale (held sources or a non-linear drive break homogeneity)
+        # Held sources or a non-linear drive break homogeneity: bisection in log scale. The direction is already tight
+        # on the common samples (scale 1), so the bracket starts at [1/2, 2] and widens 4-fold at a time (within
+        # [1e-3, 1e3]) until it holds the step of the exact statistics; then 1e-5 relative is enough.
+        lo, hi = 0.5, 2.0
+        while lo > 1e-3 and not ok(run(at(lo), cal)):
+            lo, hi = max(lo / 4, 1e-3), lo
+        while hi < 1e3 and ok(run(at(hi), cal)):
+            lo, hi = hi, min(hi * 4, 1e3)
+        while math.log(hi / lo) > 1e-5:
             mid = math.sqrt(lo * hi)
             if ok(run(at(mid), cal)):
                 lo = mid
