@@ -62,8 +62,8 @@ from ..core.solution import RESULTS
 BEARING_FACES = 64
 #: Largest number of Newton iterations; a solve that needs more reports `RESULTS.nonlinear_max_steps_reached`. Units
 #: with errors far below their clearances are the slow ones: their contacts close one per iteration, 130-260
-#: iterations on the budget example's units at 1e-3 to 1e-1 of the nominal tolerances (200 cut 40 of 1,152 solves
-#: short there, and their TE was wrong).
+#: iterations on 64 units of the budget example at 1e-3 to 1e-1 of its nominal tolerances (77 and 42 of their 1,152
+#: solves needed more than 200, the earlier limit, and a solve cut short gives a wrong TE).
 MAX_STEPS = 1000
 #: A force residual below this many machine epsilons of the largest term it is computed from is at rounding level.
 ROUNDING_FACTOR = 64.0
