@@ -211,23 +211,39 @@ def test_tip_relief_and_crowning_values():
     lengths=st.lists(st.one_of(st.none(), st.floats(0.5, 20.0)), min_size=8, max_size=8),
     shapes=st.lists(st.sampled_from(["linear", "parabolic"]), min_size=2, max_size=2),
 )
-def test_path_relief_of_all_meshes_at_once_is_flank_pair_relief_of_each(amounts, lengths, shapes):
-    """`PathRelief` (what `SlicedMeshes` evaluates) against `flank_pair_relief` (the definition), mesh by mesh, for
-    tip and root reliefs of either shape and length (None: from the single/double-contact boundary)."""
+def test_path_relief_of_all_meshes_at_once_is_the_definition_for_each(amounts, lengths, shapes):
+    """`PathRelief` (what `SlicedMeshes` evaluates, three meshes at once) against the definition written out here in
+    NumPy: on a path of length g from the tip of gear `first` to the tip of gear `last`, first's tip relief C_a over
+    L from u = 0 and last's root relief from u = 0, last's tip relief and first's root relief from u = g; each
+    C (max(L − d, 0)/L)^e, e = 1 linear or 2 parabolic, L = g − p_bt when not given."""
     pbt = 30.0
-    path = jnp.asarray([48.0, 55.0, 41.0])
+    path = np.asarray([48.0, 55.0, 41.0])
 
     def tooth(i, shape):
         return ToothModification(
             amounts[i], tip_relief_length=lengths[i], root_relief=amounts[i + 1], root_relief_length=lengths[i + 1], shape=shape
         )
 
-    a, b, c = tooth(0, shapes[0]), tooth(2, shapes[1]), tooth(4, shapes[0])
-    flanks = [(a, b), (b, c), (c, a)]
-    u = jnp.linspace(-5.0, 60.0, 53)[None, :] * jnp.ones((3, 1))
-    got = PathRelief(flanks, path, pbt)(u, path)
-    for m, (first, last) in enumerate(flanks):
-        np.testing.assert_allclose(got[m], flank_pair_relief(first, last, u[m], path[m], pbt), rtol=1e-13, atol=1e-12)
+    def reference(first, last, uu, g):
+        def one(amount, length, d, shape):
+            L = g - pbt if length is None else length
+            return amount * (np.maximum(L - d, 0.0) / L) ** (1 if shape == "linear" else 2)
+
+        (a_tip, a_root, a_len, a_rlen, a_shape), (b_tip, b_root, b_len, b_rlen, b_shape) = first, last
+        return (
+            one(a_tip, a_len, uu, a_shape)
+            + one(b_root, b_rlen, uu, b_shape)
+            + one(b_tip, b_len, g - uu, b_shape)
+            + one(a_root, a_rlen, g - uu, a_shape)
+        )
+
+    spec = [(amounts[i], amounts[i + 1], lengths[i], lengths[i + 1], shapes[k]) for i, k in ((0, 0), (2, 1), (4, 0))]
+    teeth = [tooth(0, shapes[0]), tooth(2, shapes[1]), tooth(4, shapes[0])]
+    pairs = [(0, 1), (1, 2), (2, 0)]
+    u = np.linspace(-5.0, 60.0, 53)[None, :] * np.ones((3, 1))
+    got = np.asarray(PathRelief([(teeth[a], teeth[b]) for a, b in pairs], jnp.asarray(path), pbt)(jnp.asarray(u), jnp.asarray(path)))
+    for m, (a, b) in enumerate(pairs):
+        np.testing.assert_allclose(got[m], reference(spec[a], spec[b], u[m], path[m]), rtol=1e-13, atol=1e-12)
 
 
 def test_unrolled_runge_kutta_is_diffrax_own_step_to_rounding():

@@ -121,24 +121,11 @@ def modifications_from_amounts(amounts: Float[Array, " 4"], *, shape: str = "lin
     return StageModifications(sun=sun, planet_sun_flank=planet, planet_ring_flank=planet)
 
 
-def _relief(amount, length, default_length, distance, exponent: int):
-    """Relief at `distance` (mm) before the end of the path it is measured from."""
-    length = jnp.where(jnp.isnan(length), default_length, length)
-    t = jnp.maximum(length - distance, 0.0) / length
-    return amount * t**exponent
-
-
 def flank_pair_relief(first: ToothModification, last: ToothModification, u, path_length, base_pitch):
     """Profile modification (µm) of a tooth pair at position `u` (mm) on a path of contact of length
-    `path_length` that starts at the tip of gear `first` and ends at the tip of gear `last`."""
-    default = jnp.maximum(path_length - base_pitch, 1e-3 * base_pitch)
-    to_end = path_length - u
-    return (
-        _relief(first.tip_relief, first.tip_relief_length, default, u, first.exponent)
-        + _relief(last.root_relief, last.root_relief_length, default, u, last.exponent)
-        + _relief(last.tip_relief, last.tip_relief_length, default, to_end, last.exponent)
-        + _relief(first.root_relief, first.root_relief_length, default, to_end, first.exponent)
-    )
+    `path_length` that starts at the tip of gear `first` and ends at the tip of gear `last` (`PathRelief` of one mesh)."""
+    u = jnp.asarray(u, dtype=float)
+    return PathRelief([(first, last)], jnp.reshape(jnp.asarray(path_length, dtype=float), (1,)), base_pitch)(u[None], path_length)[0]
 
 
 class PathRelief(eqx.Module):
@@ -172,6 +159,7 @@ class PathRelief(eqx.Module):
     def __call__(self, u, path_length) -> Float[Array, "m ..."]:
         """Relief (µm) of pairs at positions `u` (M, …) mm on paths of contact of length `path_length` (M,)."""
         shape = (u.shape[0],) + (1,) * (u.ndim - 1)
+        path_length = jnp.broadcast_to(jnp.asarray(path_length, dtype=float), (u.shape[0],))
         g = jnp.reshape(path_length, shape)
         out = jnp.zeros_like(u)
         for term, d in enumerate((u, u, g - u, g - u)):

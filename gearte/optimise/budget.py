@@ -434,9 +434,10 @@ def _calibrate_and_verify(
         # on the common samples (scale 1), so the bracket starts at [1/2, 2] and widens 4-fold at a time (within
         # [1e-3, 1e3]) until it holds the step of the exact statistics; then 1e-5 relative is enough.
         lo, hi = 0.5, 2.0
+        widened_down = False
         while lo > 1e-3 and not ok(run(at(lo), cal)):
-            lo, hi = max(lo / 4, 1e-3), lo
-        while hi < 1e3 and ok(run(at(hi), cal)):
+            lo, hi, widened_down = max(lo / 4, 1e-3), lo, True
+        while not widened_down and hi < 1e3 and ok(run(at(hi), cal)):  # (hi is known to fail if the bracket went down)
             lo, hi = hi, min(hi * 4, 1e3)
         while math.log(hi / lo) > 1e-5:
             mid = math.sqrt(lo * hi)
