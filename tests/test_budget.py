@@ -244,3 +244,49 @@ def test_bad_budget_configs(edit, match, tmp_path):
     cfg.write_text(edit((ROOT / "examples" / "planetary_wang2013_budget.toml").read_text()))
     with pytest.raises(ConfigError, match=match):
         load_study(cfg)
+
+
+@functools.cache
+def _root_search():
+    from gearte.optimise.budget import _bracketed_root
+
+    def run(root, lo, hi):
+        def g(x):
+            # Increasing, far from linear over the bracket (a regula falsi without the Illinois step stalls on it).
+            return jnp.expm1(x - root) + 0.1 * jnp.tanh(5 * (x - root))
+
+        return _bracketed_root(g, lo, hi)
+
+    return jax.jit(run, static_argnums=(1, 2))
+
+
+@pytest.mark.parametrize("root", [0.0, 0.3, -0.2, 2.5, -5.0, 4.0])
+def test_scale_root_search_finds_the_root_from_log_s_zero(root):
+    # The non-homogeneous budget's scale search: bracketed outwards from log s = 0, then Illinois to 1e-12 in log s.
+    found = float(_root_search()(root, math.log(1e-3), math.log(1e2)))
+    assert found <= root + 1e-12  # the feasible end of the bracket
+    assert found == pytest.approx(root, abs=1e-11)
+
+
+def test_scale_root_search_returns_the_end_of_the_bracket_that_is_the_answer():
+    lo, hi = math.log(1e-3), math.log(1e2)
+    assert float(_root_search()(10.0, lo, hi)) == hi  # feasible everywhere: the largest scale
+    assert float(_root_search()(-10.0, lo, hi)) == lo  # infeasible everywhere: the smallest
+
+
+def test_scale_root_search_spends_few_passes():
+    # Each evaluation is a pass over the common samples (for a contact drive, thousands of equilibrium solves): count.
+    from gearte.optimise.budget import _bracketed_root
+
+    calls = []
+
+    def g(x):
+        calls.append(float(x))
+        return math.expm1(float(x) - 1.7) + 0.1 * math.tanh(5 * (float(x) - 1.7))
+
+    def traced(x):
+        return jax.pure_callback(lambda v: np.asarray(g(v), dtype=np.float64), jax.ShapeDtypeStruct((), jnp.float64), x)
+
+    found = float(jax.jit(lambda: _bracketed_root(traced, math.log(1e-3), math.log(1e2)))())
+    assert found == pytest.approx(1.7, abs=1e-11)
+    assert len(calls) <= 12, calls  # a fixed bisection of the whole bracket then regula falsi took 26
