@@ -3,6 +3,7 @@
 import functools
 import json
 import math
+import re
 from pathlib import Path
 
 import equinox as eqx
@@ -290,3 +291,21 @@ def test_scale_root_search_spends_few_passes():
     found = float(jax.jit(lambda: _bracketed_root(traced, math.log(1e-3), math.log(1e2)))())
     assert found == pytest.approx(1.7, abs=1e-11)
     assert len(calls) <= 12, calls  # a fixed bisection of the whole bracket then regula falsi took 26
+
+
+def test_budget_progress_bar_counts_the_optimiser_evaluations_and_changes_nothing(capsys):
+    # The single-source problem (cheap): the bar's host callback must not change the result.
+    d = ExplicitDrive([ExplicitTerm("a", 1)], gain=GAIN)
+    model = gearte.ErrorModel({"a": gearte.ErrorSource(gearte.Rayleigh(5.0, truncate_at=10.0), gearte.UniformPhase())}, d.error_sources)
+    p = budget_problem(
+        d, model, costs={"a": gearte.Reciprocal(0.0, 1.0)}, nominal={"a": 10.0}, spec=20 * GAIN, statistic=gearte.Yield(0.99)
+    )
+    quiet = optimise_budget(p, key=0, n_samples=2000, n_check=40_000, progress=False)
+    assert "budget: BFGS" not in capsys.readouterr().err
+    shown = optimise_budget(p, key=0, n_samples=2000, n_check=40_000, progress=True)
+    err = capsys.readouterr().err
+    assert "budget: BFGS on the smoothed cost" in err
+    # tqdm redraws at most every 0.1 s: the evaluations it shows are the first ones, each with the cost it had.
+    costs = [float(m) for m in re.findall(r"cost ([0-9.e+-]+)\]", err)]
+    assert costs and all(c > 0.9 * quiet.cost for c in costs)  # the smoothed cost of tight tolerances, never below the optimum by much
+    assert shown.tolerances == quiet.tolerances and shown.cost == quiet.cost

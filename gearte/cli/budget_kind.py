@@ -206,7 +206,7 @@ class Budget(AbstractStudyKind):
             return budget_problem(study.drive, model, costs=b.costs, nominal=b.nominal, constraints=cons, maximum=b.maximum)
 
         p = problem(study.errors)
-        best = optimise_budget(p, key=k_opt, n_samples=b.samples, n_check=b.check_samples, throw=False)
+        best = optimise_budget(p, key=k_opt, n_samples=b.samples, n_check=b.check_samples, throw=False, progress=progress)
         if not is_successful(best.result) and best.label == "infeasible":
             raise ValueError(f"[budget]: {message(best.result)}")
         base = uniform_scaling(p, key=k_opt, n_check=b.check_samples)

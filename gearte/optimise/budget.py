@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -42,6 +43,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, PRNGKeyArray
+from tqdm import tqdm
 
 from ..core.metrics import AbstractMetric, Peak
 from ..core.precision import require_x64
@@ -423,10 +425,29 @@ def _statistic_grad_jit(p: BudgetProblem, tolerances: Mapping[str, Array], draws
     return statistic(p, metric_samples(p, tolerances, draws)[0], c)
 
 
+#: The progress bar of the budget being optimised (None: none shown). The compiled objective reports every evaluation
+#: to `_report_cost` through a host callback, which updates whatever bar is set here at that moment.
+_BAR: list[Any] = []
+
+
+def _report_cost(cost) -> None:
+    if _BAR:
+        _BAR[-1].set_postfix_str(f"cost {float(cost):.6g}", refresh=False)
+        _BAR[-1].update(1)
+
+
 def _cost_objective(y: Array, args: tuple[BudgetProblem, _Draws]) -> Array:
     """The budget's objective: the capped cost of the tight tolerances in the direction e^y."""
     p, draws = args
     return _capped_cost(p, tight_tolerances(p, y, draws))
+
+
+def _cost_objective_shown(y: Array, args: tuple[BudgetProblem, _Draws]) -> Array:
+    """`_cost_objective`, reporting every evaluation to the progress bar. A program with a host callback is not kept in
+    JAX's persistent compilation cache, so this one is used only where the bar is shown."""
+    cost = _cost_objective(y, args)
+    jax.debug.callback(_report_cost, cost)
+    return cost
 
 
 def _met(c: Constraint, x: np.ndarray) -> np.ndarray:
@@ -501,7 +522,14 @@ def _calibrate_and_verify(
 
 
 def optimise_budget(
-    p: BudgetProblem, *, key: int | PRNGKeyArray, n_samples: int = 4096, n_check: int = 50_000, max_steps: int = 300, throw: bool = True
+    p: BudgetProblem,
+    *,
+    key: int | PRNGKeyArray,
+    n_samples: int = 4096,
+    n_check: int = 50_000,
+    max_steps: int = 300,
+    throw: bool = True,
+    progress: bool | None = None,
 ) -> BudgetResult:
     """The cheapest tolerances meeting the constraints, checked on a fresh Monte Carlo sample.
 
@@ -514,6 +542,9 @@ def optimise_budget(
     - `n_check`: fresh samples for calibration and for verification (each).
     - `throw`: raise if the spec is infeasible within the minimum tolerances or the optimiser
       fails (else check the result's `result`).
+    - `progress`: show the optimiser's evaluations of the cost on stderr (default: when stderr is a terminal);
+      each evaluation scales the tolerances by a root search over the common samples. (The optimiser's program is
+      then not kept in JAX's persistent compilation cache, which does not store host callbacks.)
 
     **Returns:** a `BudgetResult`.
     """
@@ -536,7 +567,15 @@ def optimise_budget(
     # Start from the nominal tolerances' proportions.
     y0 = jnp.log(jnp.asarray([float(p.nominal[n]) for n in p.names]))
     # The smoothed statistic is not smooth to machine precision: ask for 1e-6 relative cost.
-    sol = optx.minimise(_cost_objective, optx.BFGS(rtol=1e-6, atol=1e-6), y0, (p, draws), max_steps=max_steps, throw=False)
+    show = sys.stderr.isatty() if progress is None else progress
+    with tqdm(desc="budget: BFGS on the smoothed cost", unit=" evaluations", disable=not show, leave=False) as bar:
+        _BAR.append(bar)
+        try:
+            fn = _cost_objective_shown if show else _cost_objective
+            sol = optx.minimise(fn, optx.BFGS(rtol=1e-6, atol=1e-6), y0, (p, draws), max_steps=max_steps, throw=False)
+            jax.effects_barrier()
+        finally:
+            _BAR.pop()
     tol = _tight_tolerances_jit(p, sol.value, draws)
     capped = {n for n in p.names if float(tol[n]) >= float(p.maximum[n])}
     finer = [n for n in p.names if float(tol[n]) < float(p.minimum[n])]
