@@ -309,3 +309,36 @@ def test_budget_progress_bar_counts_the_optimiser_evaluations_and_changes_nothin
     costs = [float(m) for m in re.findall(r"cost ([0-9.e+-]+)\]", err)]
     assert costs and all(c > 0.9 * quiet.cost for c in costs)  # the smoothed cost of tight tolerances, never below the optimum by much
     assert shown.tolerances == quiet.tolerances and shown.cost == quiet.cost
+
+
+def test_budget_report_gives_angular_tolerances_in_arcseconds():
+    # The RV budget example budgets the disc indexing error (rad inside): its report row must read in ″, not "0.00".
+    from gearte.cli.budget_kind import _report
+
+    study = load_study(ROOT / "examples" / "rv_robot_joint_budget.toml")
+    names = ("pin_radius", "disc_indexing")
+    rad = math.radians(12.0 / 3600)  # 12″
+    b = {
+        "constraint": "yield",
+        "spec_arcmin": 1.0,
+        "target_yield": 0.9973,
+        "optimisation_samples": 64,
+        "verified_samples": 1000,
+        "solver_converged": True,
+        "solver_result": "successful",
+        "tolerances_um": {"pin_radius": 1.2, "disc_indexing": rad},
+        "nominal_tolerances_um": {"pin_radius": 1.0, "disc_indexing": math.radians(10.0 / 3600)},
+        "baseline_tolerances_um": {"pin_radius": 1.1, "disc_indexing": 1.1 * math.radians(10.0 / 3600)},
+        "grades": {},
+        "cost_models": {n: gearte.Reciprocal(0.0, 1.0).describe() for n in names},
+        "contributions_arcmin": {n: 0.1 for n in names},
+        "cost": 2.0,
+        "baseline_cost": 2.1,
+        "baseline_scale": 1.1,
+        "verified_yield": 0.998,
+        "baseline_verified_yield": 0.998,
+    }
+    text = "\n".join(_report(study, {"budget": b}))
+    row = next(line for line in text.splitlines() if line.startswith("| disc_indexing |"))
+    assert "| 10″ | 12″ | 11″ |" in row and "T in rad" in row
+    assert "| pin_radius | 1 | 1.20 | 1.10 |" in text and "T in µm" in text

@@ -10,7 +10,7 @@ import jax
 from ..core.metrics import AbstractMetric
 from ..core.schema import ConfigError, Table
 from ..core.solution import is_successful, message
-from ..core.units import UNIT_SYMBOLS, angle_from_rad
+from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import Figure
 from ..optimise.budget import (
     Constraint,
@@ -362,10 +362,20 @@ def _report(study: Study, s: dict) -> list[str]:
         f"| source | nominal | optimised | uniform scaling | ISO grade | cost model | share of the statistic ({sym}) |",
         "|---|---|---|---|---|---|---|",
     ]
+    specs = study.errors.specs
+
+    def angular(n: str) -> bool:
+        return n in specs and specs[n].unit == "rad"
+
+    def tol(n: str, value: float, fmt: str = ".2f") -> str:
+        """A tolerance as the report shows it: µm, or ″ for an angular source (held in rad)."""
+        return f"{value * ARCSEC_PER_RAD:.3g}″" if angular(n) else format(value, fmt)
+
     for n, t in b["tolerances_um"].items():
+        cost_model = b["cost_models"][n].replace("T in µm", "T in rad") if angular(n) else b["cost_models"][n]
         lines.append(
-            f"| {n} | {b['nominal_tolerances_um'][n]:g} | {t:.2f} | {b['baseline_tolerances_um'][n]:.2f} | {b['grades'].get(n, '—')} | "
-            f"{b['cost_models'][n]} | {b[f'contributions_{u}'][n]:.2f} |"
+            f"| {n} | {tol(n, b['nominal_tolerances_um'][n], 'g')} | {tol(n, t)} | {tol(n, b['baseline_tolerances_um'][n])} | "
+            f"{b['grades'].get(n, '—')} | {cost_model} | {b[f'contributions_{u}'][n]:.2f} |"
         )
     if b.get("optimised_direction_beaten_by_uniform_scaling"):
         lines += [
@@ -375,7 +385,7 @@ def _report(study: Study, s: dict) -> list[str]:
         ]
     lines += [
         "",
-        "Tolerances in µm (rad for angular sources).",
+        "Tolerances in µm, those of angular sources in ″ (summary.json holds them in rad).",
         "",
         f"Cost {b['cost']:.4f} against {b['baseline_cost']:.4f} for the cheapest uniform scaling of the nominal tolerances "
         f"(× {b['baseline_scale']:.3f}); verified yield {b['verified_yield']:.5f} (baseline {b['baseline_verified_yield']:.5f}).",
@@ -387,10 +397,10 @@ def _report(study: Study, s: dict) -> list[str]:
             f"Without the assembly rule (every phase random) the same spec costs {r['cost']:.4f} optimised, {r['baseline_cost']:.4f} "
             f"by uniform scaling: the rule changes which tolerances matter.",
             "",
-            "| source | with the rule (µm) | random assembly (µm) |",
+            "| source | with the rule | random assembly |",
             "|---|---|---|",
         ]
-        lines += [f"| {n} | {b['tolerances_um'][n]:.2f} | {r['tolerances_um'][n]:.2f} |" for n in b["tolerances_um"]]
+        lines += [f"| {n} | {tol(n, b['tolerances_um'][n])} | {tol(n, r['tolerances_um'][n])} |" for n in b["tolerances_um"]]
         lines.append("")
     lines += ["![contributions](contributions.png)", ""]
     if "pareto" in b:
