@@ -342,3 +342,8 @@ def test_budget_report_gives_angular_tolerances_in_arcseconds():
     row = next(line for line in text.splitlines() if line.startswith("| disc_indexing |"))
     assert "| 10″ | 12″ | 11″ |" in row and "T in rad" in row
     assert "| pin_radius | 1 | 1.20 | 1.10 |" in text and "T in µm" in text
+    assert "± 0.00141, one binomial standard error on 1,000 fresh samples" in text  # √(0.998 · 0.002 / 1000)
+    assert "Below its target" not in text
+    # A verified yield under the target is said so, with how many standard errors that is.
+    low = "\n".join(_report(study, {"budget": b | {"verified_yield": 0.995}}))
+    assert "**Below its target on the fresh sample:** the yield of the metric is 0.9950 against 0.9973, 1.4 binomial" in low

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import TYPE_CHECKING, Any
 
 import jax
@@ -335,6 +336,28 @@ def _grade(spec: dict, tol_um: float):
         return f"none ({e})"
 
 
+def _binomial_se(p: float, n: int) -> float:
+    return math.sqrt(max(p * (1.0 - p), 0.0) / max(n, 1))
+
+
+def _below_target(b: dict) -> list[str]:
+    """A warning for every yield constraint whose verified yield on the fresh sample is below its target."""
+    cons = b.get("constraints") or [{"metric": "the metric", "constraint": b["constraint"], "target": b.get("target_yield")}]
+    yields = b.get("verified_yields") or [b["verified_yield"]]
+    n = b["verified_samples"]
+    out = []
+    for c, y in zip(cons, yields, strict=False):
+        if c["constraint"] != "yield" or y >= c["target"]:
+            continue
+        se = _binomial_se(c["target"], n)
+        out.append(
+            f"**Below its target on the fresh sample:** the yield of {c['metric']} is {y:.4f} against {c['target']:g}, "
+            f"{(c['target'] - y) / se:.1f} binomial standard errors ({se:.4f} at the target for {n:,} samples) below it. "
+            "A sample this size cannot verify the target more closely: raise `check_samples` for a firmer check."
+        )
+    return out + ([""] if out else [])
+
+
 def _report(study: Study, s: dict) -> list[str]:
     b = s["budget"]
     u = study.unit
@@ -388,9 +411,12 @@ def _report(study: Study, s: dict) -> list[str]:
         "Tolerances in µm, those of angular sources in ″ (summary.json holds them in rad).",
         "",
         f"Cost {b['cost']:.4f} against {b['baseline_cost']:.4f} for the cheapest uniform scaling of the nominal tolerances "
-        f"(× {b['baseline_scale']:.3f}); verified yield {b['verified_yield']:.5f} (baseline {b['baseline_verified_yield']:.5f}).",
+        f"(× {b['baseline_scale']:.3f}); verified yield {b['verified_yield']:.5f} (baseline {b['baseline_verified_yield']:.5f}; "
+        f"± {_binomial_se(b['verified_yield'], b['verified_samples']):.5f}, one binomial standard error on "
+        f"{b['verified_samples']:,} fresh samples).",
         "",
     ]
+    lines += _below_target(b)
     if "random_assembly" in b:
         r = b["random_assembly"]
         lines += [
