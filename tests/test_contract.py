@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 
 import equinox as eqx
@@ -297,3 +298,62 @@ def test_a_budget_scales_each_law_as_its_draws_are_scaled():
     fn = gearte.TEStudy(study.drive, scaled, metric=toy_drive.LostMotion())
     study_values = np.asarray(jax.vmap(fn)(gearte.sample_keys(key, 0, n)))
     np.testing.assert_allclose(study_values, budget_values, rtol=1e-12)
+
+
+class _ToyThatFails(toy_drive.ToyGearPair):
+    """The toy drive, said to have failed its solve wherever the gear's eccentricity points within 0.2 rad of +x
+    (about 3 % of random phases, whatever the tolerances)."""
+
+    def solved(self, response):
+        return jnp.cos(response["gear_phase"]) < math.cos(0.2)
+
+    def response(self, errors):
+        return super().response(errors) | {"gear_phase": self.checked(errors)["gear"].phase[0]}
+
+
+def test_a_budget_counts_samples_with_failed_solves_as_missing_every_spec():
+    """A drive that solves says where a solve failed (`AbstractDrive.solved`); the budget's exact checks (calibration,
+    verification) must not take such a sample's metric at face value: it misses every spec, and the verification
+    counts it. The smooth statistics the optimiser steers by are left as they are."""
+    import tomllib
+
+    from gearte.optimise import budget as gb
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(DRIVES, "toy_gear_pair", toy_drive.ToyGearPair)
+        study = build_study(tomllib.loads(toy_drive.STUDY), "toy.toml")
+    drive = _ToyThatFails(study.drive.z1, study.drive.z2, base_radius=study.drive.base_radius, points=study.drive.points)
+    nominal = {"pinion": 10.0, "gear": 16.0, "backlash": 20.0}
+    p = gearte.budget_problem(
+        drive,
+        study.errors,
+        costs={n: gearte.Reciprocal.normalised(t) for n, t in nominal.items()},
+        nominal=nominal,
+        spec=8.0 / gearte.units.ARCMIN_PER_RAD,
+        metric=toy_drive.LostMotion(),
+        statistic=gearte.Yield(0.95),
+    )
+    draws = gb.common_draws(p, jax.random.key(3), 200)
+    tol = {n: jnp.asarray(v) for n, v in nominal.items()}
+    exact = np.asarray(gb.metric_samples(p, tol, draws, exact=True))[0]
+    smooth = np.asarray(gb.metric_samples(p, tol, draws))[0]
+    failed = np.cos(np.asarray(draws.errors["gear"].phase).ravel()) >= math.cos(0.2)
+    assert 0 < failed.sum() < failed.size
+    assert np.all(exact[failed] > 100 * float(p.constraints[0].spec))  # counted as far out of spec
+    plain = study.drive  # the same drive without the failure: the other samples keep their exact metric
+    q = eqx.tree_at(lambda t: t.drive, p, plain)
+    np.testing.assert_array_equal(exact[~failed], np.asarray(gb.metric_samples(q, tol, draws, exact=True))[0][~failed])
+    np.testing.assert_array_equal(smooth, np.asarray(gb.metric_samples(q, tol, draws))[0])
+    # The verification reports how many of its samples failed.
+    r = gb._calibrate_and_verify(
+        p,
+        {n: float(v) for n, v in nominal.items()},
+        set(),
+        key=jax.random.key(4),
+        n_check=500,
+        label="t",
+        result=gearte.RESULTS.successful,
+        converged=True,
+    )
+    assert 3 <= r.failed_solves <= 40  # about 3 % of 500
+    assert r.verified_yield <= 1 - r.failed_solves / 500

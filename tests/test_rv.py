@@ -52,6 +52,11 @@ def arms(theta_T: np.ndarray) -> np.ndarray:
 def test_zero_errors_give_zero_te_and_lost_motion(drive):
     r = drive.response(None)
     assert bool(np.all(np.asarray(r.result == RESULTS.successful)))
+    # `solved` (what a budget's exact checks read): true here, false as soon as one solve of the response failed.
+    assert bool(drive.solved(r))
+    pick = jnp.arange(r.te.size).reshape(r.te.shape) == 5
+    one_failed = jax.vmap(jax.vmap(lambda b: RESULTS.where(b, RESULTS.nonlinear_max_steps_reached, RESULTS.successful)))(pick)
+    assert not bool(drive.solved(eqx.tree_at(lambda x: x.result, r, one_failed)))
     np.testing.assert_allclose(np.asarray(r.te), 0.0, atol=1e-13)
     # Under the small load itself the TE is the elastic deflection only: of the order of deflection_mm / R.
     assert np.max(np.abs(np.asarray(r.te_loaded))) < 10 * float(drive.deflection_mm) / R

@@ -251,6 +251,7 @@ class Budget(AbstractStudyKind):
             "baseline_scale": base.tolerances[first] / b.nominal[first],
             "verified_yield": best.verified_yield,
             "verified_samples": best.verified_samples,
+            "verified_samples_with_failed_solves": best.failed_solves,
             "baseline_verified_yield": base.verified_yield,
             f"verified_statistic_{u}": show(best.verified_statistic),
             "solver_converged": best.converged,
@@ -417,6 +418,12 @@ def _report(study: Study, s: dict) -> list[str]:
         "",
     ]
     lines += _below_target(b)
+    if b.get("verified_samples_with_failed_solves"):
+        lines += [
+            f"**{b['verified_samples_with_failed_solves']:,} of the {b['verified_samples']:,} verification samples have a failed "
+            "solve**; they count as missing every spec.",
+            "",
+        ]
     if "random_assembly" in b:
         r = b["random_assembly"]
         lines += [

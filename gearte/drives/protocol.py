@@ -227,6 +227,13 @@ class AbstractDrive(eqx.Module):
         """Rough peak working memory of one Monte Carlo sample (bytes), to size blocks."""
         return 2048
 
+    def solved(self, response: Any) -> Array:
+        """Whether every solve behind `response` succeeded (a boolean scalar). A closed-form drive always succeeds;
+        a drive that solves (the RV reducer's equilibria) says where it did not, and a tolerance budget then counts
+        that sample as missing every spec in its exact checks."""
+        del response
+        return jnp.asarray(True)
+
     def sample_outputs(self, errors: Errors, response: Any) -> dict[str, Array]:
         """Per-sample arrays a `gearte run` keeps beside the metric, computed in the same Monte Carlo
         pass from the same response (given to `study_outputs` as ``context.outputs``); none by default."""

@@ -390,6 +390,10 @@ class RVKHV(AbstractGridDrive):
             "exactly for the closed contacts (the rigid limit); result codes per solve"
         )
 
+    def solved(self, response: RVResponse) -> Array:
+        """Whether every equilibrium solve of `response` (every angle, both loads) succeeded."""
+        return jnp.all(response.result == RESULTS.successful)
+
     def bytes_per_sample(self) -> int:
         m = self.discs * self.z_pins + 2 * self.cranks
         n = 5 + 3 * (self.cranks + self.discs)

@@ -249,9 +249,20 @@ def metric_samples(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Dr
 
     def one(u, errs):
         r = p.drive.response(_errors_at(p, tolerances, u, errs))
-        return jnp.stack([c.metric(p.drive, r) if exact else c.metric.smooth(p.drive, r) for c in p.constraints])
+        if not exact:
+            return jnp.stack([c.metric.smooth(p.drive, r) for c in p.constraints])
+        # The exact checks (calibration, verification) count a sample whose solves failed as missing every spec:
+        # its metric would be that of a wrong state.
+        ok = p.drive.solved(r)
+        return jnp.stack([jnp.where(ok, c.metric(p.drive, r), _missed(c)) for c in p.constraints])
 
     return jax.vmap(one)(draws.u, draws.errors).T
+
+
+def _missed(c: Constraint) -> Array:
+    """A finite value of `c`'s metric that misses its spec by far (a sample whose solves failed)."""
+    far = 1e3 * jnp.maximum(jnp.abs(c.spec), 1.0)
+    return -far if c.metric.higher_is_better else far
 
 
 def te_samples(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws) -> Float[Array, " n"]:
@@ -386,6 +397,8 @@ class BudgetResult(eqx.Module):
     - `verified_yield`: fraction of `verified_samples` fresh samples meeting every constraint;
       `verified_yields`: per constraint; `verified_statistic`: the first constraint's exact
       statistic there (rad for angles); `verified_values`: the first constraint's exact metric per sample.
+    - `failed_solves`: verification samples whose solves failed (a drive that solves, such as the RV reducer; they
+      count as missing every spec).
     - `result`: the solve's `RESULTS` code; `converged`: whether the optimiser reported success.
     """
 
@@ -399,6 +412,7 @@ class BudgetResult(eqx.Module):
     result: RESULTS
     converged: bool
     label: str
+    failed_solves: int = 0
 
 
 # Module-level compiled functions, keyed on the problem's structure and not on a fresh closure: a
@@ -507,6 +521,7 @@ def _calibrate_and_verify(
         result = RESULTS.infeasible
     x = np.asarray(run(tol, ver))
     met = [_met(c, x[j]) for j, c in enumerate(p.constraints)]
+    failed = int(np.sum(x[0] == float(_missed(p.constraints[0]))))
     return BudgetResult(
         tolerances={n: float(v) for n, v in tol.items()},
         cost=float(total_cost(p, tol)),
@@ -518,6 +533,7 @@ def _calibrate_and_verify(
         result=result,
         converged=converged,
         label=label,
+        failed_solves=failed,
     )
 
 
