@@ -305,6 +305,7 @@ def test_budget_progress_bar_counts_the_optimiser_evaluations_and_changes_nothin
     shown = optimise_budget(p, key=0, n_samples=2000, n_check=40_000, progress=True)
     err = capsys.readouterr().err
     assert "budget: BFGS on the smoothed cost" in err
+    assert "budget: calibrating and verifying (optimised) on 40,000 fresh samples" in err
     # tqdm redraws at most every 0.1 s: the evaluations it shows are the first ones, each with the cost it had.
     costs = [float(m) for m in re.findall(r"cost ([0-9.e+-]+)\]", err)]
     assert costs and all(c > 0.9 * quiet.cost for c in costs)  # the smoothed cost of tight tolerances, never below the optimum by much

@@ -210,7 +210,7 @@ class Budget(AbstractStudyKind):
         best = optimise_budget(p, key=k_opt, n_samples=b.samples, n_check=b.check_samples, throw=False, progress=progress)
         if not is_successful(best.result) and best.label == "infeasible":
             raise ValueError(f"[budget]: {message(best.result)}")
-        base = uniform_scaling(p, key=k_opt, n_check=b.check_samples)
+        base = uniform_scaling(p, key=k_opt, n_check=b.check_samples, progress=progress)
         # The optimiser works on smooth surrogates of the statistics over a few common samples; the calibration
         # on exact metrics can leave its direction costlier than plain uniform scaling. Then report so, and keep
         # the cheaper budget that meets the same checks.

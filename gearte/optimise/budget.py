@@ -473,16 +473,32 @@ def _exact_stat(c: Constraint, x: np.ndarray, margin_samples: int | None = None)
 
 
 def _calibrate_and_verify(
-    p: BudgetProblem, direction: dict[str, float], capped: set[str], *, key, n_check: int, label: str, result, converged: bool
+    p: BudgetProblem,
+    direction: dict[str, float],
+    capped: set[str],
+    *,
+    key,
+    n_check: int,
+    label: str,
+    result,
+    converged: bool,
+    progress: bool | None = None,
 ) -> BudgetResult:
     """Scale the uncapped tolerances so every exact statistic on a fresh sample meets its spec with
-    a four-standard-error margin, then verify on another fresh sample."""
+    a four-standard-error margin, then verify on another fresh sample. `progress`: a bar over the passes over the
+    fresh samples (default: when stderr is a terminal)."""
     k_cal, k_ver = jax.random.split(key)
     cal = common_draws(p, k_cal, n_check)
     ver = common_draws(p, k_ver, n_check)
+    show = sys.stderr.isatty() if progress is None else progress
+    bar = tqdm(
+        desc=f"budget: calibrating and verifying ({label}) on {n_check:,} fresh samples", unit=" passes", disable=not show, leave=False
+    )
 
     def run(t, d):
-        return _exact_samples_jit(p, t, d)
+        x = _exact_samples_jit(p, t, d)
+        bar.update(1)
+        return x
 
     def ok(x) -> bool:
         return all(
@@ -520,6 +536,7 @@ def _calibrate_and_verify(
         # The finest scale searched still misses the target: the spec cannot be met this way.
         result = RESULTS.infeasible
     x = np.asarray(run(tol, ver))
+    bar.close()
     met = [_met(c, x[j]) for j, c in enumerate(p.constraints)]
     failed = int(np.sum(x[0] == float(_missed(p.constraints[0]))))
     return BudgetResult(
@@ -604,7 +621,9 @@ def optimise_budget(
     result = RESULTS.promote(sol.result)
     converged = bool(sol.result == optx.RESULTS.successful)
     check(result, throw=throw, what="optimise_budget (BFGS on the smoothed cost)")
-    return _calibrate_and_verify(p, direction, capped, key=k_check, n_check=n_check, label="optimised", result=result, converged=converged)
+    return _calibrate_and_verify(
+        p, direction, capped, key=k_check, n_check=n_check, label="optimised", result=result, converged=converged, progress=progress
+    )
 
 
 def _failed(p: BudgetProblem, result) -> BudgetResult:
@@ -623,8 +642,9 @@ def _failed(p: BudgetProblem, result) -> BudgetResult:
     )
 
 
-def uniform_scaling(p: BudgetProblem, *, key: int | PRNGKeyArray, n_check: int = 50_000) -> BudgetResult:
-    """Baseline: the nominal tolerances scaled by one common factor to meet the same constraints."""
+def uniform_scaling(p: BudgetProblem, *, key: int | PRNGKeyArray, n_check: int = 50_000, progress: bool | None = None) -> BudgetResult:
+    """Baseline: the nominal tolerances scaled by one common factor to meet the same constraints (`progress`: a bar
+    over the passes over the fresh samples, by default when stderr is a terminal)."""
     _, k_check = jax.random.split(as_key(key))
     return _calibrate_and_verify(
         p,
@@ -635,6 +655,7 @@ def uniform_scaling(p: BudgetProblem, *, key: int | PRNGKeyArray, n_check: int =
         label="uniform scaling of the nominal tolerances",
         result=RESULTS.successful,
         converged=True,
+        progress=progress,
     )
 
 
