@@ -275,22 +275,46 @@ def test_scale_root_search_returns_the_end_of_the_bracket_that_is_the_answer():
     assert float(_root_search()(-10.0, lo, hi)) == lo  # infeasible everywhere: the smallest
 
 
-def test_scale_root_search_spends_few_passes():
-    # Each evaluation is a pass over the common samples (for a contact drive, thousands of equilibrium solves): count.
+def _counted_root_search(g):
+    """`_bracketed_root` of a Python function g over gearte's bracket, and the points it evaluated g at."""
     from gearte.optimise.budget import _bracketed_root
 
     calls = []
 
-    def g(x):
-        calls.append(float(x))
-        return math.expm1(float(x) - 1.7) + 0.1 * math.tanh(5 * (float(x) - 1.7))
+    def host(v):
+        calls.append(float(v))
+        return np.asarray(g(float(v)), dtype=np.float64)
 
     def traced(x):
-        return jax.pure_callback(lambda v: np.asarray(g(v), dtype=np.float64), jax.ShapeDtypeStruct((), jnp.float64), x)
+        return jax.pure_callback(host, jax.ShapeDtypeStruct((), jnp.float64), x)
 
     found = float(jax.jit(lambda: _bracketed_root(traced, math.log(1e-3), math.log(1e2)))())
+    return found, calls
+
+
+def test_scale_root_search_spends_few_passes():
+    # Each evaluation is a pass over the common samples (for a contact drive, thousands of equilibrium solves): count.
+    found, calls = _counted_root_search(lambda x: math.expm1(x - 1.7) + 0.1 * math.tanh(5 * (x - 1.7)))
     assert found == pytest.approx(1.7, abs=1e-11)
-    assert len(calls) <= 12, calls  # a fixed bisection of the whole bracket then regula falsi took 26
+    assert len(calls) <= 14, calls  # a fixed bisection of the whole bracket then regula falsi took 28
+    # Feasible everywhere, or infeasible everywhere: the search stops at the end of the bracket.
+    found, calls = _counted_root_search(lambda x: x - 10.0)
+    assert found == math.log(1e2) and len(calls) <= 4, calls
+    found, calls = _counted_root_search(lambda x: x + 10.0)
+    assert found == math.log(1e-3) and len(calls) <= 5, calls
+
+
+def test_scale_root_search_bisects_a_lopsided_bracket():
+    # A violation of 1e-9 on the feasible side against 1e3 on the other (a model's NaN is counted as 1e3): regula
+    # falsi alone creeps from the small end and stopped 15 % below the root; bisecting while the bracket is lopsided
+    # and wider than 0.01 finds it (a jump: about as many evaluations as plain bisection).
+    found, calls = _counted_root_search(lambda x: 1e-9 * (x - 1.0) if x <= 1.0 else 1e3)
+    assert found == pytest.approx(1.0, abs=1e-10) and found <= 1.0
+    assert len(calls) <= 45, len(calls)
+    # A continuous violation with the NaN region just beyond the root: found as tightly as a smooth root.
+    found, calls = _counted_root_search(lambda x: 1e-4 * (x - 1.0) if x <= 1.02 else 1e3)
+    assert found == pytest.approx(1.0, abs=1e-10) and found <= 1.0 + 1e-12
+    assert len(calls) <= 12, len(calls)
 
 
 def test_budget_progress_bar_counts_the_optimiser_evaluations_and_changes_nothing(capsys):
@@ -343,7 +367,7 @@ def test_budget_report_gives_angular_tolerances_in_arcseconds():
     row = next(line for line in text.splitlines() if line.startswith("| disc_indexing |"))
     assert "| 10″ | 12″ | 11″ |" in row and "T in rad" in row
     assert "| pin_radius | 1 | 1.20 | 1.10 |" in text and "T in µm" in text
-    assert "± 0.00141, one binomial standard error on 1,000 fresh samples" in text  # √(0.998 · 0.002 / 1000)
+    assert "± 0.00164, one binomial standard error at a yield of 0.9973 on 1,000 fresh samples" in text  # √(0.9973 · 0.0027 / 1000)
     assert "Below its target" not in text
     # A verified yield under the target is said so, with how many standard errors that is.
     low = "\n".join(_report(study, {"budget": b | {"verified_yield": 0.995}}))

@@ -357,3 +357,9 @@ def test_a_budget_counts_samples_with_failed_solves_as_missing_every_spec():
     )
     assert 3 <= r.failed_solves <= 40  # about 3 % of 500
     assert r.verified_yield <= 1 - r.failed_solves / 500
+    assert int(np.sum(np.isnan(r.verified_values))) == r.failed_solves  # NaN, not a made-up metric, where they failed
+    assert np.isfinite(r.verified_statistic) and r.verified_statistic < 10 * float(p.constraints[0].spec)
+    # A mean + kσ has no value to average for a failed sample: it is taken over the samples that solved.
+    c = gb.Constraint(toy_drive.LostMotion(), float(p.constraints[0].spec), gearte.MeanKSigma(3.0))
+    x = np.where(failed, float(gb._missed(c)), exact)
+    assert gb._exact_stat(c, x) == pytest.approx(np.mean(exact[~failed]) + 3 * np.std(exact[~failed], ddof=1), rel=1e-12)

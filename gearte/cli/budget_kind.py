@@ -279,8 +279,8 @@ class Budget(AbstractStudyKind):
                 study.errors.specs,
             )
             pr = problem(rand_model)
-            rb = optimise_budget(pr, key=k_rand, n_samples=b.samples, n_check=b.check_samples, throw=False)
-            rbase = uniform_scaling(pr, key=k_rand, n_check=b.check_samples)
+            rb = optimise_budget(pr, key=k_rand, n_samples=b.samples, n_check=b.check_samples, throw=False, progress=progress)
+            rbase = uniform_scaling(pr, key=k_rand, n_check=b.check_samples, progress=progress)
             entry["random_assembly"] = {
                 "tolerances_um": rb.tolerances,
                 "cost": rb.cost,
@@ -291,7 +291,9 @@ class Budget(AbstractStudyKind):
         if b.pareto_specs:
             n_front = max(1000, b.check_samples // 2)
             to_int = [c0.to_internal(u, x).spec for x in b.pareto_specs]
-            front = pareto_front(p, [float(x) for x in to_int], key=k_front, n_samples=max(256, b.samples // 2), n_check=n_front)
+            front = pareto_front(
+                p, [float(x) for x in to_int], key=k_front, n_samples=max(256, b.samples // 2), n_check=n_front, progress=progress
+            )
             rows = []
             for s, r in zip(b.pareto_specs, front):
                 q = problem(study.errors, s)
@@ -299,7 +301,7 @@ class Budget(AbstractStudyKind):
                     {
                         f"spec_{u}": s,
                         "cost": r.cost,
-                        "baseline_cost": uniform_scaling(q, key=k_front, n_check=n_front).cost,
+                        "baseline_cost": uniform_scaling(q, key=k_front, n_check=n_front, progress=progress).cost,
                         "verified_yield": r.verified_yield,
                         "tolerances_um": r.tolerances,
                     }
@@ -339,6 +341,14 @@ def _grade(spec: dict, tol_um: float):
 
 def _binomial_se(p: float, n: int) -> float:
     return math.sqrt(max(p * (1.0 - p), 0.0) / max(n, 1))
+
+
+def _yield_target(b: dict) -> float:
+    """The yield whose binomial standard error the report states: the highest yield target among the constraints (the
+    verified yield where there is none), so that a verified yield of 1 does not read as exact."""
+    cons = b.get("constraints") or [{"constraint": b["constraint"], "target": b.get("target_yield")}]
+    targets = [float(c["target"]) for c in cons if c["constraint"] == "yield"]
+    return max(targets) if targets else float(b["verified_yield"])
 
 
 def _below_target(b: dict) -> list[str]:
@@ -413,15 +423,15 @@ def _report(study: Study, s: dict) -> list[str]:
         "",
         f"Cost {b['cost']:.4f} against {b['baseline_cost']:.4f} for the cheapest uniform scaling of the nominal tolerances "
         f"(× {b['baseline_scale']:.3f}); verified yield {b['verified_yield']:.5f} (baseline {b['baseline_verified_yield']:.5f}; "
-        f"± {_binomial_se(b['verified_yield'], b['verified_samples']):.5f}, one binomial standard error on "
-        f"{b['verified_samples']:,} fresh samples).",
+        f"± {_binomial_se(_yield_target(b), b['verified_samples']):.5f}, one binomial standard error at a yield of "
+        f"{_yield_target(b):g} on {b['verified_samples']:,} fresh samples).",
         "",
     ]
     lines += _below_target(b)
     if b.get("verified_samples_with_failed_solves"):
         lines += [
             f"**{b['verified_samples_with_failed_solves']:,} of the {b['verified_samples']:,} verification samples have a failed "
-            "solve**; they count as missing every spec.",
+            "solve**: a yield counts them as missing its spec, a mean ± kσ is taken over the samples that solved.",
             "",
         ]
     if "random_assembly" in b:

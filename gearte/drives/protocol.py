@@ -229,8 +229,8 @@ class AbstractDrive(eqx.Module):
 
     def solved(self, response: Any) -> Array:
         """Whether every solve behind `response` succeeded (a boolean scalar). A closed-form drive always succeeds;
-        a drive that solves (the RV reducer's equilibria) says where it did not, and a tolerance budget then counts
-        that sample as missing every spec in its exact checks."""
+        a drive that solves (the RV reducer's equilibria) says where it did not, and a tolerance budget's exact checks
+        then count that sample as missing a yield's spec (and leave it out of a mean ± kσ)."""
         del response
         return jnp.asarray(True)
 

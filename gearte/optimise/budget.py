@@ -251,8 +251,8 @@ def metric_samples(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Dr
         r = p.drive.response(_errors_at(p, tolerances, u, errs))
         if not exact:
             return jnp.stack([c.metric.smooth(p.drive, r) for c in p.constraints])
-        # The exact checks (calibration, verification) count a sample whose solves failed as missing every spec:
-        # its metric would be that of a wrong state.
+        # The exact checks (calibration, verification) mark a sample whose solves failed (its metric would be that of
+        # a wrong state) with a value far beyond every spec: a yield counts it as missing, a mean ± kσ leaves it out.
         ok = p.drive.solved(r)
         return jnp.stack([jnp.where(ok, c.metric(p.drive, r), _missed(c)) for c in p.constraints])
 
@@ -292,11 +292,16 @@ _BRACKET = (1e-3, 1e2)  # scale of the direction e^y, which starts at the nomina
 _ROOT_TOL = 1e-12
 #: Most evaluations of the root search after the bracket is found (Illinois converges superlinearly; ~6-10 are used).
 _ROOT_STEPS = 60
+#: Ratio of the values at the bracket's ends beyond which the root search bisects instead of interpolating, while the
+#: bracket is wider than `_WIDE` in log s (1 %: near the root one end's value is small by design).
+_LOPSIDED = 1e3
+_WIDE = 0.01
 
 
 def _bracketed_root(g, lo: float, hi: float) -> Array:
-    """The root of g (increasing: ≤ 0 feasible, > 0 infeasible) in [lo, hi] (log s), or the end of the bracket that is
-    the answer: lo where even lo is infeasible, hi where even hi is feasible.
+    """The root of g (increasing: ≤ 0 feasible, > 0 infeasible; finite: the caller maps a NaN to a violation) in
+    [lo, hi] (log s, lo < 0 < hi), or the end of the bracket that is the answer: lo where even lo is infeasible, hi
+    where even hi is feasible.
 
     The search brackets the root outwards from log s = 0 (the direction as given: the optimiser starts at the nominal
     tolerances and moves the direction by factors, not orders of magnitude), doubling the step from log 4, so it seldom
@@ -330,12 +335,15 @@ def _bracketed_root(g, lo: float, hi: float) -> Array:
 
     def cond(state):
         a, b, ga, _, _, k = state
-        return (b - a > _ROOT_TOL) & (ga < 0) & (k < _ROOT_STEPS)
+        return bracketed & (b - a > _ROOT_TOL) & (ga < 0) & (k < _ROOT_STEPS)
 
     def body(state):
         a, b, ga, gb, side, k = state
         c = jnp.clip((a * gb - b * ga) / jnp.where(gb != ga, gb - ga, 1.0), a, b)
-        c = jnp.where((c <= a) | (c >= b), 0.5 * (a + b), c)
+        # Bisect while the bracket is wide and its ends' values differ by orders of magnitude (an infeasible end far
+        # outside, or a model's NaN counted as a large violation): regula falsi would creep from the small end.
+        lopsided = (jnp.maximum(-ga, gb) > _LOPSIDED * jnp.minimum(-ga, gb)) & (b - a > _WIDE)
+        c = jnp.where((c <= a) | (c >= b) | lopsided, 0.5 * (a + b), c)
         gc = g(c)
         feasible = gc <= 0
         # Halve the function value at the end that stays twice in a row (Illinois), to avoid one-sided stalls.
@@ -396,9 +404,10 @@ class BudgetResult(eqx.Module):
     - `tolerances`: per budgeted source (µm, or rad); `cost`: Σ cost_i.
     - `verified_yield`: fraction of `verified_samples` fresh samples meeting every constraint;
       `verified_yields`: per constraint; `verified_statistic`: the first constraint's exact
-      statistic there (rad for angles); `verified_values`: the first constraint's exact metric per sample.
-    - `failed_solves`: verification samples whose solves failed (a drive that solves, such as the RV reducer; they
-      count as missing every spec).
+      statistic there, over the samples that solved (rad for angles); `verified_values`: the first constraint's exact
+      metric per sample (NaN where its solves failed).
+    - `failed_solves`: verification samples whose solves failed (a drive that solves, such as the RV reducer; a
+      yield counts them as missing its spec, a mean ± kσ is taken over the samples that solved).
     - `result`: the solve's `RESULTS` code; `converged`: whether the optimiser reported success.
     """
 
@@ -468,7 +477,16 @@ def _met(c: Constraint, x: np.ndarray) -> np.ndarray:
     return x >= float(c.spec) if c.metric.higher_is_better else x <= float(c.spec)
 
 
+def _solved(c: Constraint, x: np.ndarray) -> np.ndarray:
+    """The samples of `x` (exact values of `c`'s metric) whose solves succeeded: those not set to `_missed`."""
+    return x[x != float(_missed(c))]
+
+
 def _exact_stat(c: Constraint, x: np.ndarray, margin_samples: int | None = None) -> float:
+    """`c`'s exact statistic of `x`. A yield counts a sample whose solves failed as missing its spec; a mean ± kσ has
+    no value to average for it, and is taken over the samples that solved (their number is reported apart)."""
+    if not isinstance(c.statistic, Yield):
+        x = _solved(c, x)
     return c.statistic.exact(x, lower=c.metric.higher_is_better, margin_samples=margin_samples)
 
 
@@ -491,9 +509,27 @@ def _calibrate_and_verify(
     cal = common_draws(p, k_cal, n_check)
     ver = common_draws(p, k_ver, n_check)
     show = sys.stderr.isatty() if progress is None else progress
-    bar = tqdm(
-        desc=f"budget: calibrating and verifying ({label}) on {n_check:,} fresh samples", unit=" passes", disable=not show, leave=False
-    )
+    desc = f"budget: calibrating and verifying ({label}) on {n_check:,} fresh samples"
+    with tqdm(desc=desc, unit=" passes", disable=not show, leave=False) as bar:
+        return _calibrate_and_verify_with(
+            p, direction, capped, cal, ver, bar, n_check=n_check, label=label, result=result, converged=converged
+        )
+
+
+def _calibrate_and_verify_with(
+    p: BudgetProblem,
+    direction: dict[str, float],
+    capped: set[str],
+    cal: _Draws,
+    ver: _Draws,
+    bar: Any,
+    *,
+    n_check: int,
+    label: str,
+    result,
+    converged: bool,
+) -> BudgetResult:
+    """`_calibrate_and_verify` on drawn calibration and verification samples, counting its passes on `bar`."""
 
     def run(t, d):
         x = _exact_samples_jit(p, t, d)
@@ -536,7 +572,6 @@ def _calibrate_and_verify(
         # The finest scale searched still misses the target: the spec cannot be met this way.
         result = RESULTS.infeasible
     x = np.asarray(run(tol, ver))
-    bar.close()
     met = [_met(c, x[j]) for j, c in enumerate(p.constraints)]
     failed = int(np.sum(x[0] == float(_missed(p.constraints[0]))))
     return BudgetResult(
@@ -544,9 +579,9 @@ def _calibrate_and_verify(
         cost=float(total_cost(p, tol)),
         verified_yield=float(np.mean(np.logical_and.reduce(met))),
         verified_yields=tuple(float(np.mean(m)) for m in met),
-        verified_statistic=_exact_stat(p.constraints[0], x[0]),
+        verified_statistic=_exact_stat(p.constraints[0], _solved(p.constraints[0], x[0])),
         verified_samples=n_check,
-        verified_values=x[0],
+        verified_values=np.where(x[0] == float(_missed(p.constraints[0])), np.nan, x[0]),
         result=result,
         converged=converged,
         label=label,
@@ -672,10 +707,13 @@ def contributions(p: BudgetProblem, tolerances: Mapping[str, float], *, key: int
     return {n: float(g[n] * t[n]) for n in p.names}
 
 
-def pareto_front(p: BudgetProblem, specs, *, key: int | PRNGKeyArray, n_samples: int = 4096, n_check: int = 50_000) -> list[BudgetResult]:
-    """Optimised budgets for each spec of the first constraint in `specs` (rad for angles): the cost-vs-spec front."""
+def pareto_front(
+    p: BudgetProblem, specs, *, key: int | PRNGKeyArray, n_samples: int = 4096, n_check: int = 50_000, progress: bool | None = None
+) -> list[BudgetResult]:
+    """Optimised budgets for each spec of the first constraint in `specs` (rad for angles): the cost-vs-spec front
+    (`progress` as for `optimise_budget`)."""
     out = []
     for s in specs:
         q = eqx.tree_at(lambda b: b.constraints[0].spec, p, jnp.asarray(float(s)))
-        out.append(optimise_budget(q, key=key, n_samples=n_samples, n_check=n_check, throw=False))
+        out.append(optimise_budget(q, key=key, n_samples=n_samples, n_check=n_check, throw=False, progress=progress))
     return out
