@@ -366,7 +366,8 @@ def _below_target(b: dict) -> list[str]:
             f"{(c['target'] - y) / se:.1f} binomial standard errors ({se:.4f} at the target for {n:,} samples) below it. "
             "A sample this size cannot verify the target more closely: raise `check_samples` for a firmer check."
         )
-    return out + ([""] if out else [])
+        out.append("")  # each warning a paragraph of its own
+    return out
 
 
 def _report(study: Study, s: dict) -> list[str]:
