@@ -84,6 +84,7 @@ if TYPE_CHECKING:
     from .drives.helical_stiffness import (
         AbstractStiffnessModel as AbstractStiffnessModel,
         MeanStiffness as MeanStiffness,
+        SinglePairStiffness as SinglePairStiffness,
         SlicedStiffness as SlicedStiffness,
         TransverseStiffness as TransverseStiffness,
     )
@@ -280,6 +281,7 @@ _LAZY: dict[str, str] = {
     "SlicedStiffness": ".drives.helical_stiffness",
     "TransverseStiffness": ".drives.helical_stiffness",
     "MeanStiffness": ".drives.helical_stiffness",
+    "SinglePairStiffness": ".drives.helical_stiffness",
     "BatchAssembly": ".identification",
     "Diagnosis": ".identification",
     "Identification": ".identification",
@@ -466,6 +468,7 @@ __all__ = [
     "RuleAllocation",
     "RuleProblem",
     "SensitivityTable",
+    "SinglePairStiffness",
     "Sinusoid",
     "SlicedStiffness",
     "SobolIndices",

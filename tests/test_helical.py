@@ -18,7 +18,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gearte import AbstractStiffnessModel, MeanStiffness, SlicedStiffness, TransverseStiffness
+from gearte import AbstractStiffnessModel, MeanStiffness, SinglePairStiffness, SlicedStiffness, TransverseStiffness
 from gearte.core.signal import evaluate
 from gearte.drives.helical import EXAMPLE, HelicalPlanetary, load_helical, wind_turbine_report
 from gearte.drives.helical_equations import MeshedSystem, loa_errors, stage_system
@@ -92,6 +92,37 @@ def test_sliced_stiffness_has_the_iso_mean_and_the_spur_limit_alternates_single_
     np.testing.assert_allclose(np.mean(total > 1.5), float(g.contact_ratio[0]) - 1, atol=0.05)
 
 
+def test_single_pair_stiffness_keeps_the_iso_mean_and_peaks_at_c_prime(model):
+    """`SinglePairStiffness`: each pair weighs (1 − c x²)/(1 − c/3) along its path (x = 2u/g − 1). Its mean over the
+    path is 1, so the mean mesh stiffness stays c_γ b (ε_α pairs per slice, as the sliced model); with c = 0.75 (1 −
+    1/ε_α) its maximum, relative to the mean single-pair stiffness c_γα/ε_α, is ISO 6336-1's c'/(c_γα/ε_α): checked
+    against `iso6336_mesh_stiffness`, which computes c' and c_γα = c'(0.75 ε_α + 0.25) on its own."""
+    g, w = _weights(model, 8, SinglePairStiffness())
+    n = model.stage.n_planets
+    per_slice = jnp.mean(jnp.sum(w, axis=-1), axis=0)
+    np.testing.assert_allclose(per_slice[:n], float(g.contact_ratio[0]), rtol=2e-3)
+    np.testing.assert_allclose(per_slice[n:], float(g.contact_ratio[1]), rtol=2e-3)
+    c_single, c_mesh = iso6336_mesh_stiffness(model.stage)
+    peak = np.asarray(c_single / (c_mesh / g.contact_ratio))  # c' over the mean single-pair stiffness, per mesh
+    _, w_flat = _weights(model, 8)
+    ratio = np.asarray(jnp.max(w, axis=(0, 2, 3)) / jnp.max(w_flat, axis=(0, 2, 3)))  # the largest weight of a pair
+    np.testing.assert_allclose(ratio[:n], peak[0], rtol=1e-3)
+    np.testing.assert_allclose(ratio[n:], peak[1], rtol=1e-3)
+    # At the tip and root a pair is (1 − c) of its mid-path stiffness: with c = 0.4 for every mesh, pairs wholly on
+    # the path (thin slices) weigh from 0.6/(1 − 0.4/3) near the ends to 1/(1 − 0.4/3) at mid path.
+    _, w4 = _weights(model, 40, SinglePairStiffness(0.4))
+    _, w1 = _weights(model, 40)
+    on_path = np.asarray(w1) >= 1 - 1e-12
+    ratio = np.asarray(w4)[on_path] / np.asarray(w1)[on_path]
+    assert ratio.max() == pytest.approx(1 / (1 - 0.4 / 3), rel=1e-4)
+    # A pair wholly on the path is at least a slice's half span s from its ends: x ≤ 1 − 2s/g there.
+    half_span = float(model.stage.face_width) / 40 * math.tan(float(g.base_helix_angle)) / 2
+    x_end = 1 - 2 * half_span / float(jnp.max(g.path_length))
+    assert ratio.min() == pytest.approx((1 - 0.4 * x_end**2) / (1 - 0.4 / 3), rel=1e-3)
+    with pytest.raises(ValueError, match="end_drop"):
+        SinglePairStiffness(1.0)
+
+
 @pytest.mark.parametrize("n_slices", [1, 3, 8, 40])
 def test_pair_range_holds_every_pair_that_is_ever_on_the_path(model, n_slices):
     """`pair_range` is tight: with three more pairs on each side the extra pairs never carry weight,
@@ -160,12 +191,17 @@ def test_stiffness_model_must_be_an_object_and_files_name_one(model, tmp_path):
             half()  # pyright: ignore[reportAbstractUsage]
     text = EXAMPLE.read_text(encoding="utf-8")
     assert 'stiffness_model = "slices"' in text
-    for name, cls in (("slices", SlicedStiffness), ("transverse", TransverseStiffness), ("mean", MeanStiffness)):
+    for name, cls in (
+        ("slices", SlicedStiffness),
+        ("transverse", TransverseStiffness),
+        ("mean", MeanStiffness),
+        ("single_pair", SinglePairStiffness),
+    ):
         path = tmp_path / f"{name}.toml"
         path.write_text(text.replace('stiffness_model = "slices"', f'stiffness_model = "{name}"'), encoding="utf-8")
         assert type(load_helical(path).stiffness_model) is cls
     path.write_text(text.replace('stiffness_model = "slices"', 'stiffness_model = "spur"'), encoding="utf-8")
-    with pytest.raises(ValueError, match=r"\[model\]\.stiffness_model: one of 'slices', 'transverse', 'mean', got 'spur'"):
+    with pytest.raises(ValueError, match=r"\[model\]\.stiffness_model: one of 'slices', 'transverse', 'mean', 'single_pair', got 'spur'"):
         load_helical(path)
 
 

@@ -45,6 +45,7 @@ if TYPE_CHECKING:
     from .helical_stiffness import (
         AbstractStiffnessModel as AbstractStiffnessModel,
         MeanStiffness as MeanStiffness,
+        SinglePairStiffness as SinglePairStiffness,
         SlicedStiffness as SlicedStiffness,
         TransverseStiffness as TransverseStiffness,
     )
@@ -59,6 +60,7 @@ _LAZY = {
     "PeriodicSolver": ".helical_solve",
     "AbstractStiffnessModel": ".helical_stiffness",
     "MeanStiffness": ".helical_stiffness",
+    "SinglePairStiffness": ".helical_stiffness",
     "SlicedStiffness": ".helical_stiffness",
     "TransverseStiffness": ".helical_stiffness",
 }

@@ -77,7 +77,8 @@ class HelicalPlanetary(eqx.Module):
     - `n_slices`: K slices across the face width (8 resolves the wind-turbine stage's fluctuation to < 0.5 %).
     - `stiffness_model`: an `AbstractStiffnessModel`: `SlicedStiffness()` (time-varying, helical overlap
       included; the default), `TransverseStiffness()` (every slice in phase: the rectangular
-      single/double-contact alternation of a spur pair, ε_α only) or `MeanStiffness()` (constant c_γ b).
+      single/double-contact alternation of a spur pair, ε_α only), `MeanStiffness()` (constant c_γ b) or
+      `SinglePairStiffness()` (the sliced model with each pair stiffest at mid path, ISO 6336-1's c' at its peak).
     - `contact_smoothing`: ℓ, µm, of the smooth unilateral contact law.
     - `solver`: a `PeriodicSolver`.
     """
