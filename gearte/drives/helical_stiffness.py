@@ -140,17 +140,18 @@ class SinglePairStiffness(AbstractStiffnessModel):
     (ε_α = 1.59) and internal (1.87) meshes. A number in [0, 1) sets c for every mesh."""
 
     name: ClassVar[str] = "single_pair"
-    end_drop: float | None = None
+    end_drop: float | Array | None = None
 
     def __check_init__(self):
-        if self.end_drop is not None and not (0.0 <= float(self.end_drop) < 1.0):
-            raise ValueError(f"SinglePairStiffness.end_drop: a fraction in [0, 1) of the mid-path stiffness, got {self.end_drop!r}")
+        c = self.end_drop
+        if isinstance(c, (int, float)) and not (0.0 <= float(c) < 1.0):  # (an array, e.g. traced, is the caller's to check)
+            raise ValueError(f"SinglePairStiffness.end_drop: a fraction in [0, 1) of the mid-path stiffness, got {c!r}")
 
     def drop(self, meshes: "SlicedMeshes") -> Float[Array, " m"]:
-        """c of every mesh."""
+        """c of every mesh (differentiable in a given `end_drop`)."""
         if self.end_drop is None:
             return 0.75 * (1.0 - 1.0 / meshes.contact_ratio)
-        return jnp.full_like(meshes.contact_ratio, float(self.end_drop))
+        return jnp.broadcast_to(jnp.asarray(self.end_drop, dtype=meshes.contact_ratio.dtype), meshes.contact_ratio.shape)
 
     def contacts(self, meshes: "SlicedMeshes", tau) -> tuple[Float[Array, "m k j"], Float[Array, "m k j"]]:
         u, w = _pairs_on_path(meshes, tau, meshes.lead_shift)
