@@ -292,23 +292,22 @@ _BRACKET = (1e-3, 1e2)  # scale of the direction e^y, which starts at the nomina
 _ROOT_TOL = 1e-12
 #: Most evaluations of the root search after the bracket is found (Illinois converges superlinearly; ~6-10 are used).
 _ROOT_STEPS = 60
-#: Ratio of the values at the bracket's ends beyond which the root search bisects instead of interpolating, while the
-#: bracket is wider than `_WIDE` in log s (1 %: near the root one end's value is small by design).
-_LOPSIDED = 1e3
-_WIDE = 0.01
+#: The violation a scale search counts where the model has no valid state (NaN): far beyond any metric's.
+_NO_STATE = 1e3
 
 
-def _bracketed_root(g, lo: float, hi: float) -> Array:
+def _bracketed_root(g, lo: float, hi: float, *, bisect_above: float = math.inf) -> Array:
     """The root of g (increasing: ≤ 0 feasible, > 0 infeasible; finite: the caller maps a NaN to a violation) in
     [lo, hi] (log s, lo < 0 < hi), or the end of the bracket that is the answer: lo where even lo is infeasible, hi
     where even hi is feasible.
 
     The search brackets the root outwards from log s = 0 (the direction as given: the optimiser starts at the nominal
     tolerances and moves the direction by factors, not orders of magnitude), doubling the step from log 4, so it seldom
-    visits the far ends of the bracket (near-perfect parts, where a contact drive's solves are slowest); then the Illinois variant of regula
-    falsi (a bracket kept at every step, superlinear convergence) until the bracket is `_ROOT_TOL` wide. Each
-    evaluation is one pass over the common samples: about 8-12 passes, where a fixed bisection of the whole bracket
-    needed 26."""
+    visits the far ends of the bracket (near-perfect parts, where a contact drive's solves are slowest); then the
+    Illinois variant of regula falsi (a bracket kept at every step, superlinear convergence) until the bracket is
+    `_ROOT_TOL` wide, bisecting while the infeasible end's value is at least `bisect_above` (where the caller counts a
+    model without a valid state). Each evaluation is one pass over the common samples: about 8-12 passes for a smooth
+    constraint, where a fixed bisection of the whole bracket needed 26."""
     zero = jnp.zeros(())
     g0 = g(zero)
     up = g0 <= 0  # feasible at s = 1: the root lies above
@@ -334,24 +333,25 @@ def _bracketed_root(g, lo: float, hi: float) -> Array:
     bracketed = (ga <= 0) & (gb > 0)
 
     def cond(state):
-        a, b, ga, _, _, k = state
+        a, b, ga, _, _, _, k = state
         return bracketed & (b - a > _ROOT_TOL) & (ga < 0) & (k < _ROOT_STEPS)
 
     def body(state):
-        a, b, ga, gb, side, k = state
+        a, b, ga, gb, no_state, side, k = state
         c = jnp.clip((a * gb - b * ga) / jnp.where(gb != ga, gb - ga, 1.0), a, b)
-        # Bisect while the bracket is wide and its ends' values differ by orders of magnitude (an infeasible end far
-        # outside, or a model's NaN counted as a large violation): regula falsi would creep from the small end.
-        lopsided = (jnp.maximum(-ga, gb) > _LOPSIDED * jnp.minimum(-ga, gb)) & (b - a > _WIDE)
-        c = jnp.where((c <= a) | (c >= b) | lopsided, 0.5 * (a + b), c)
+        # Bisect while the infeasible end is where the model has no valid state (its value, before any Illinois
+        # halving, at least `bisect_above`): regula falsi would creep from the feasible end towards that jump.
+        c = jnp.where((c <= a) | (c >= b) | no_state, 0.5 * (a + b), c)
         gc = g(c)
         feasible = gc <= 0
         # Halve the function value at the end that stays twice in a row (Illinois), to avoid one-sided stalls.
         ga_new = jnp.where(feasible, gc, jnp.where(side == -1, 0.5 * ga, ga))
         gb_new = jnp.where(feasible, jnp.where(side == 1, 0.5 * gb, gb), gc)
-        return jnp.where(feasible, c, a), jnp.where(feasible, b, c), ga_new, gb_new, jnp.where(feasible, 1, -1), k + 1
+        no_state_new = jnp.where(feasible, no_state, gc >= bisect_above)
+        return jnp.where(feasible, c, a), jnp.where(feasible, b, c), ga_new, gb_new, no_state_new, jnp.where(feasible, 1, -1), k + 1
 
-    a, *_ = jax.lax.while_loop(cond, body, (a, b, ga, gb, jnp.asarray(0), jnp.asarray(0)))
+    start = (a, b, ga, gb, gb >= bisect_above, jnp.asarray(0), jnp.asarray(0))
+    a, *_ = jax.lax.while_loop(cond, body, start)
     # Not bracketed: the search stopped at an end of the bracket, which is the answer.
     return jnp.where(bracketed, a, jnp.where(up, hi, lo))
 
@@ -367,11 +367,11 @@ def _scale(p: BudgetProblem, d: Mapping[str, Array], draws: _Draws) -> Array:
         s = jnp.exp(log_s)
         v = jnp.max(_violation(p, metric_samples(p, {n: s * dd[n] for n in p.names}, draws)))
         # Far outside its tolerances a model may have no valid state (NaN): that is infeasible.
-        return jnp.nan_to_num(v, nan=1e3, posinf=1e3)
+        return jnp.nan_to_num(v, nan=_NO_STATE, posinf=_NO_STATE)
 
     ds = jax.lax.stop_gradient(d)
     lo, hi = math.log(_BRACKET[0]), math.log(_BRACKET[1])
-    root = _bracketed_root(lambda x: g(x, ds), lo, hi)
+    root = _bracketed_root(lambda x: g(x, ds), lo, hi, bisect_above=_NO_STATE)
     found = root
     log_s = jax.lax.stop_gradient(found)
     # Implicit-function theorem at the root: d(log s) = −∂g/∂d · dd / ∂g/∂(log s).
