@@ -116,15 +116,13 @@ if TYPE_CHECKING:
     )
     from .optimise.allocation_measured import MeasuredAllocation as MeasuredAllocation, allocate_measured as allocate_measured
     from .optimise.budget import (
-        BudgetProblem as BudgetProblem,
         BudgetResult as BudgetResult,
-        Constraint as Constraint,
-        budget_problem as budget_problem,
         contributions as contributions,
         optimise_budget as optimise_budget,
         pareto_front as pareto_front,
         uniform_scaling as uniform_scaling,
     )
+    from .optimise.budget_model import BudgetProblem as BudgetProblem, Constraint as Constraint, budget_problem as budget_problem
     from .optimise.statistics import (
         AbstractStatistic as AbstractStatistic,
         MeanKSigma as MeanKSigma,
@@ -307,10 +305,10 @@ _LAZY: dict[str, str] = {
     "worst_case": ".optimise.allocation",
     "MeasuredAllocation": ".optimise.allocation_measured",
     "allocate_measured": ".optimise.allocation_measured",
-    "BudgetProblem": ".optimise.budget",
+    "BudgetProblem": ".optimise.budget_model",
     "BudgetResult": ".optimise.budget",
-    "Constraint": ".optimise.budget",
-    "budget_problem": ".optimise.budget",
+    "Constraint": ".optimise.budget_model",
+    "budget_problem": ".optimise.budget_model",
     "contributions": ".optimise.budget",
     "optimise_budget": ".optimise.budget",
     "pareto_front": ".optimise.budget",

@@ -18,7 +18,8 @@ import gearte
 from gearte import ConfigError, budget_problem, cli, contributions, optimise_budget, smooth_quantile, uniform_scaling
 from gearte.cli.config import load_study
 from gearte.drives import ExplicitDrive, ExplicitTerm
-from gearte.optimise.budget import _tight_tolerances_jit, common_draws
+from gearte.optimise.budget import _tight_tolerances_jit
+from gearte.optimise.budget_model import common_draws
 
 ROOT = Path(__file__).resolve().parents[1]
 GAIN = 1e-5
@@ -249,14 +250,14 @@ def test_bad_budget_configs(edit, match, tmp_path):
 
 @functools.cache
 def _root_search():
-    from gearte.optimise.budget import _bracketed_root
+    from gearte.optimise.root_search import bracketed_root
 
     def run(root, lo, hi):
         def g(x):
             # Increasing, far from linear over the bracket (a regula falsi without the Illinois step stalls on it).
             return jnp.expm1(x - root) + 0.1 * jnp.tanh(5 * (x - root))
 
-        return _bracketed_root(g, lo, hi)
+        return bracketed_root(g, lo, hi)
 
     return jax.jit(run, static_argnums=(1, 2))
 
@@ -276,9 +277,10 @@ def test_scale_root_search_returns_the_end_of_the_bracket_that_is_the_answer():
 
 
 def _counted_root_search(g):
-    """`_bracketed_root` of a Python function g over gearte's bracket, and the points it evaluated g at; a value of
+    """`bracketed_root` of a Python function g over gearte's bracket, and the points it evaluated g at; a value of
     `_NO_STATE` (1e3) is where the model has no valid state, as `_scale` counts a NaN."""
-    from gearte.optimise.budget import _NO_STATE, _bracketed_root
+    from gearte.optimise.budget import _NO_STATE
+    from gearte.optimise.root_search import bracketed_root
 
     calls = []
 
@@ -289,7 +291,7 @@ def _counted_root_search(g):
     def traced(x):
         return jax.pure_callback(host, jax.ShapeDtypeStruct((), jnp.float64), x)
 
-    found = float(jax.jit(lambda: _bracketed_root(traced, math.log(1e-3), math.log(1e2), bisect_above=_NO_STATE))())
+    found = float(jax.jit(lambda: bracketed_root(traced, math.log(1e-3), math.log(1e2), bisect_above=_NO_STATE))())
     return found, calls
 
 

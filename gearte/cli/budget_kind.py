@@ -13,14 +13,8 @@ from ..core.schema import ConfigError, Table
 from ..core.solution import is_successful, message
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import Figure
-from ..optimise.budget import (
-    Constraint,
-    budget_problem,
-    contributions,
-    optimise_budget,
-    pareto_front,
-    uniform_scaling,
-)
+from ..optimise.budget import contributions, optimise_budget, pareto_front, uniform_scaling
+from ..optimise.budget_model import Constraint, budget_problem
 from ..optimise.costs import Exponential, GradeTable, Power, Reciprocal, ReciprocalSquare
 from ..optimise.statistics import MeanKSigma, Yield
 from ..standards.iso1328 import nearest_grade

@@ -19,14 +19,17 @@ How it is solved:
 - **The constraints are always tight.** Along a direction e^y the tolerances are scaled by
   the largest s that meets every constraint. When the drive is linear and every metric is
   positively homogeneous of degree 1 (a peak of a sinusoidal drive, sources toleranced about
-  0) s = spec / statistic(e^y) exactly; otherwise s is found by a bracketed root search in log s, and its
-  gradient by the implicit-function theorem (ds/dy = −∂g/∂y / ∂g/∂s). BFGS (optimistix)
+  0) s = spec / statistic(e^y) exactly; otherwise s is found by a bracketed root search in log s
+  (`gearte.optimise.root_search`), and its gradient by the implicit-function theorem (ds/dy = −∂g/∂y / ∂g/∂s). BFGS (optimistix)
   minimises the cost over y. A source's cost is flat beyond its maximum T_max (default 10 ×
   nominal): sources that barely matter are held there.
 - **Checked, not assumed.** The found direction is scaled on a fresh Monte Carlo sample so
   that every exact yield clears its target by four binomial standard errors, then verified
   on another fresh seed. The baseline — the cheapest uniform scaling of the nominal
   tolerances — gets the same treatment.
+
+The problem, its common draws and its metric samples are in `gearte.optimise.budget_model`; this module scales,
+optimises, calibrates and verifies.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from __future__ import annotations
 import functools
 import math
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import equinox as eqx
@@ -45,315 +48,27 @@ import optimistix as optx
 from jaxtyping import Array, Float, PRNGKeyArray
 from tqdm import tqdm
 
-from ..core.metrics import AbstractMetric, Peak
 from ..core.precision import require_x64
 from ..core.solution import RESULTS, check
-from ..drives.protocol import AbstractDrive, Eccentricity
-from ..studies.errors import ErrorModel
-from ..studies.laws import AbstractValueLaw
-from ..studies.montecarlo import as_key, sample_keys
-from .costs import AbstractCostModel
-from .statistics import AbstractStatistic, Yield
-
-
-class Constraint(eqx.Module):
-    """One constraint of a budget: `statistic` of `metric` against `spec` (rad for angles, pairs for counts)."""
-
-    metric: AbstractMetric
-    spec: Float[Array, ""]
-    statistic: AbstractStatistic
-
-    def __init__(self, metric: AbstractMetric, spec: float, statistic: AbstractStatistic = Yield()):
-        if not isinstance(metric, AbstractMetric):
-            raise ValueError(f"Constraint.metric: a metric object such as gearte.Peak(), got {metric!r}")
-        if not isinstance(statistic, AbstractStatistic):
-            raise ValueError(f"Constraint.statistic: gearte.Yield(target) or gearte.MeanKSigma(k), got {statistic!r}")
-        s = float(spec)
-        if not (math.isfinite(s) and s > 0):
-            raise ValueError(f"Constraint.spec: the specification of {metric.name} must be > 0, got {spec!r}")
-        self.metric, self.spec, self.statistic = metric, jnp.asarray(s), statistic
-
-
-class BudgetProblem(eqx.Module):
-    """A tolerance-budget problem (build with `budget_problem`)."""
-
-    drive: AbstractDrive
-    model: ErrorModel
-    costs: dict[str, AbstractCostModel]
-    nominal: dict[str, Array]
-    maximum: dict[str, Array]
-    minimum: dict[str, Array]
-    constraints: tuple[Constraint, ...]
-    width: Float[Array, ""]  # relative to the mean of each metric
-    # The order of the budgeted sources, static: a dict field comes back from `jit` with its keys sorted, so an
-    # order taken from `costs` would differ inside and outside a compiled function (and the components of the
-    # optimiser's y, built outside, would be read as other sources inside).
-    order: tuple[str, ...] = eqx.field(static=True)
-
-    @property
-    def names(self) -> list[str]:
-        """The budgeted sources, in the order given (the components of the optimiser's y), inside `jit` as outside."""
-        return list(self.order)
-
-    @property
-    def homogeneous(self) -> bool:
-        """Whether every statistic is positively homogeneous of degree 1 in the tolerances."""
-        return (
-            self.drive.linear
-            and all(c.metric.homogeneous and not c.metric.higher_is_better for c in self.constraints)
-            and all(_centre(self.model, n) is None for n in self.names)
-            and set(self.names) == set(self.model.specs)
-        )
-
-
-def _centre(model: ErrorModel, name: str):
-    """The centre a deviation source is toleranced about, or None for 0 (magnitudes)."""
-    if model.specs[name].kind == "eccentricity":
-        return None
-    law = model.sources[name].magnitude
-    if isinstance(law, AbstractValueLaw) and law.banded:
-        return law.centre()
-    return None
-
-
-def budget_problem(
-    drive: AbstractDrive,
-    model: ErrorModel,
-    *,
-    costs: Mapping[str, AbstractCostModel],
-    nominal: Mapping[str, float],
-    spec: float | None = None,
-    statistic: AbstractStatistic = Yield(),
-    metric: AbstractMetric = Peak(),
-    constraints: Sequence[Constraint] | None = None,
-    maximum: Mapping[str, float] | None = None,
-    minimum: Mapping[str, float] | None = None,
-    width: float | None = None,
-) -> BudgetProblem:
-    """Set up a budget problem.
-
-    **Arguments:**
-
-    - `drive`, `model`: the drive and how its errors are drawn at the nominal tolerances
-      (phases: random or an assembly rule).
-    - `costs`: a cost model per budgeted error source (sources not named keep their laws).
-    - `nominal`: nominal tolerance per budgeted source (µm, or rad; the laws in `model` are for these).
-    - `spec`, `statistic`, `metric`: one constraint, ``statistic(metric) ≤ spec`` (spec in rad
-      for angles); or give `constraints`, a list of `Constraint`s, instead.
-    - `maximum`: largest tolerance allowed per source (default 10 × nominal).
-    - `minimum`: the finest tolerance the shop can hold per source (default 0): a spec that
-      even these miss is infeasible, and `optimise_budget` says so.
-    - `width`: width of the smoothed quantile relative to the mean of each metric (default
-      0.005). Relative, so that a homogeneous statistic stays exactly homogeneous.
-    """
-    names = list(costs)
-    unknown = [n for n in names if n not in model.specs]
-    if unknown:
-        raise ValueError(f"costs: {unknown} are not error sources of this drive; use some of {list(model.specs)}")
-    if not names:
-        raise ValueError("costs: give a cost model for at least one error source")
-    for what, m in (("nominal", nominal),):
-        missing = [n for n in names if n not in m]
-        extra = [n for n in m if n not in names]
-        if missing or extra:
-            raise ValueError(
-                f"{what}: give one entry per budgeted source {names}"
-                + (f"; missing {missing}" if missing else "")
-                + (f"; unknown {extra}" if extra else "")
-            )
-    for n in names:
-        if not isinstance(costs[n], AbstractCostModel):
-            raise ValueError(f"costs[{n!r}]: expected a cost model such as gearte.Reciprocal(a, b)")
-        t = float(nominal[n])
-        if not (math.isfinite(t) and t > 0):
-            raise ValueError(f"nominal[{n!r}]: a tolerance must be > 0, got {nominal[n]!r}")
-    maximum = dict(maximum or {})
-    for n in names:
-        tmax = float(maximum.get(n, 10 * float(nominal[n])))
-        if not (math.isfinite(tmax) and tmax > 0):
-            raise ValueError(f"maximum[{n!r}]: must be > 0, got {tmax!r}")
-        maximum[n] = tmax
-    minimum = dict(minimum or {})
-    for n in names:
-        tmin = float(minimum.get(n, 0.0))
-        if not (math.isfinite(tmin) and 0 <= tmin < maximum[n]):
-            raise ValueError(f"minimum[{n!r}]: must be ≥ 0 and below the maximum {maximum[n]:g}, got {tmin!r}")
-        minimum[n] = tmin
-    if constraints is None:
-        if spec is None:
-            raise ValueError("spec: give the specification (rad for an angle), or a list of `constraints`")
-        constraints = [Constraint(metric, spec, statistic)]
-    elif spec is not None:
-        raise ValueError("give either `spec` (one constraint) or `constraints`, not both")
-    constraints = tuple(constraints)
-    if not constraints:
-        raise ValueError("constraints: give at least one")
-    offered = drive.metrics
-    for c in constraints:
-        if not isinstance(c, Constraint):
-            raise ValueError(f"constraints: expected gearte.Constraint objects, got {c!r}")
-        if c.metric.name not in offered:
-            raise ValueError(f"constraint metric {c.metric.name!r}: {type(drive).__name__} offers {list(offered)}")
-    w = float(width) if width is not None else 5e-3
-    if not (math.isfinite(w) and 0 < w < 1):
-        raise ValueError(f"width: a relative width in (0, 1), got {width!r}")
-    return BudgetProblem(
-        drive=drive,
-        model=model,
-        costs={n: costs[n] for n in names},
-        nominal={n: jnp.asarray(float(nominal[n])) for n in names},
-        maximum={n: jnp.asarray(maximum[n]) for n in names},
-        minimum={n: jnp.asarray(minimum[n]) for n in names},
-        constraints=constraints,
-        width=jnp.asarray(w),
-        order=tuple(names),
-    )
-
-
-class _Draws(eqx.Module):
-    """Common random numbers: the errors at the nominal tolerances, with the budgeted values as standard draws u."""
-
-    u: dict[str, Array]
-    errors: dict[str, Any]
-
-
-def common_draws(p: BudgetProblem, key: PRNGKeyArray, n: int) -> _Draws:
-    """`n` common random samples of the problem's errors from `key` (the study's per-sample keys)."""
-    return _common_draws_jit(p, key, n)
-
-
-@eqx.filter_jit
-def _common_draws_jit(p: BudgetProblem, key: PRNGKeyArray, n: int) -> _Draws:
-    errs = jax.vmap(p.model.sample)(sample_keys(key, 0, n))
-    u = {}
-    for k in p.names:
-        e = errs[k]
-        c = _centre(p.model, k)
-        value = e.magnitude if isinstance(e, Eccentricity) else e
-        u[k] = (value if c is None else value - c) / p.nominal[k]
-    return _Draws(u=u, errors=errs)
-
-
-def _errors_at(p: BudgetProblem, tolerances: Mapping[str, Array], u: Mapping[str, Array], errors: Mapping[str, Any]) -> dict:
-    out = dict(errors)
-    for k in p.names:
-        c = _centre(p.model, k)
-        value = tolerances[k] * u[k] if c is None else c + tolerances[k] * u[k]
-        e = errors[k]
-        out[k] = Eccentricity(value, e.phase) if isinstance(e, Eccentricity) else value
-    return out
-
-
-def metric_samples(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws, *, exact: bool = False) -> Float[Array, "c n"]:
-    """Each constraint's metric (rad for angles) for every drawn sample at these tolerances: smooth, or `exact`."""
-
-    def one(u, errs):
-        r = p.drive.response(_errors_at(p, tolerances, u, errs))
-        if not exact:
-            return jnp.stack([c.metric.smooth(p.drive, r) for c in p.constraints])
-        # The exact checks (calibration, verification) mark a sample whose solves failed (its metric would be that of
-        # a wrong state) with a value far beyond every spec: a yield counts it as missing, a mean ± kσ leaves it out.
-        ok = p.drive.solved(r)
-        return jnp.stack([jnp.where(ok, c.metric(p.drive, r), _missed(c)) for c in p.constraints])
-
-    return jax.vmap(one)(draws.u, draws.errors).T
-
-
-def _missed(c: Constraint) -> Array:
-    """A finite value of `c`'s metric that misses its spec by far (a sample whose solves failed)."""
-    far = 1e3 * jnp.maximum(jnp.abs(c.spec), 1.0)
-    return -far if c.metric.higher_is_better else far
-
-
-def te_samples(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws) -> Float[Array, " n"]:
-    """The first constraint's exact metric for every drawn sample (rad)."""
-    return metric_samples(p, tolerances, draws, exact=True)[0]
-
-
-def statistic(p: BudgetProblem, x: Float[Array, " n"], c: Constraint | None = None) -> Float[Array, ""]:
-    """The constrained statistic of metric samples `x`, smooth (rad for angles)."""
-    c = p.constraints[0] if c is None else c
-    return c.statistic.smooth(x, lower=c.metric.higher_is_better, width=p.width)
-
-
-def _violation(p: BudgetProblem, x: Array) -> Array:
-    """Per constraint, statistic − spec (≤ 0 where met), signed so that it grows with the tolerances."""
-    out = []
-    for j, c in enumerate(p.constraints):
-        s = statistic(p, x[j], c)
-        out.append(c.spec - s if c.metric.higher_is_better else s - c.spec)
-    return jnp.stack(out)
-
+from ..studies.montecarlo import as_key
+from .budget_model import (
+    BudgetProblem,
+    Constraint,
+    _Draws,
+    _missed,
+    _violation,
+    common_draws,
+    metric_samples,
+    statistic,
+)
+from .root_search import bracketed_root
+from .statistics import Yield
 
 _BRACKET = (1e-3, 1e2)  # scale of the direction e^y, which starts at the nominal tolerances
 
 
-#: Width in log s at which the root search stops (the constraint's root is then known to ~1e-12 relative in s).
-_ROOT_TOL = 1e-12
-#: Most evaluations of the root search after the bracket is found (Illinois converges superlinearly; ~6-10 are used).
-_ROOT_STEPS = 60
 #: The violation a scale search counts where the model has no valid state (NaN): far beyond any metric's.
 _NO_STATE = 1e3
-
-
-def _bracketed_root(g, lo: float, hi: float, *, bisect_above: float = math.inf) -> Array:
-    """The root of g (increasing: ≤ 0 feasible, > 0 infeasible; finite: the caller maps a NaN to a violation) in
-    [lo, hi] (log s, lo < 0 < hi), or the end of the bracket that is the answer: lo where even lo is infeasible, hi
-    where even hi is feasible.
-
-    The search brackets the root outwards from log s = 0 (the direction as given: the optimiser starts at the nominal
-    tolerances and moves the direction by factors, not orders of magnitude), doubling the step from log 4, so it seldom
-    visits the far ends of the bracket (near-perfect parts, where a contact drive's solves are slowest); then the
-    Illinois variant of regula falsi (a bracket kept at every step, superlinear convergence) until the bracket is
-    `_ROOT_TOL` wide, bisecting while the infeasible end's value is at least `bisect_above` (where the caller counts a
-    model without a valid state). Each evaluation is one pass over the common samples: about 8-12 passes for a smooth
-    constraint, where a fixed bisection of the whole bracket needed 26."""
-    zero = jnp.zeros(())
-    g0 = g(zero)
-    up = g0 <= 0  # feasible at s = 1: the root lies above
-
-    def widen_cond(state):
-        x, gx, _, _, _, k = state
-        outside = jnp.where(up, gx <= 0, gx > 0)
-        at_end = jnp.where(up, x >= hi, x <= lo)
-        return outside & ~at_end & (k < 8)
-
-    def widen(state):
-        x, gx, _, _, step, k = state
-        nx = jnp.clip(jnp.where(up, x + step, x - step), lo, hi)
-        return nx, g(nx), x, gx, 2.0 * step, k + 1
-
-    start = (zero, g0, zero, g0, jnp.asarray(math.log(4.0)), jnp.asarray(0))
-    x, gx, prev, g_prev, _, _ = jax.lax.while_loop(widen_cond, widen, start)
-    # Feasible end a (g ≤ 0) and infeasible end b (g > 0): the last point and the one before it.
-    a = jnp.where(up, prev, x)
-    b = jnp.where(up, x, prev)
-    ga = jnp.where(up, g_prev, gx)
-    gb = jnp.where(up, gx, g_prev)
-    bracketed = (ga <= 0) & (gb > 0)
-
-    def cond(state):
-        a, b, ga, _, _, _, k = state
-        return bracketed & (b - a > _ROOT_TOL) & (ga < 0) & (k < _ROOT_STEPS)
-
-    def body(state):
-        a, b, ga, gb, no_state, side, k = state
-        c = jnp.clip((a * gb - b * ga) / jnp.where(gb != ga, gb - ga, 1.0), a, b)
-        # Bisect while the infeasible end is where the model has no valid state (its value, before any Illinois
-        # halving, at least `bisect_above`): regula falsi would creep from the feasible end towards that jump.
-        c = jnp.where((c <= a) | (c >= b) | no_state, 0.5 * (a + b), c)
-        gc = g(c)
-        feasible = gc <= 0
-        # Halve the function value at the end that stays twice in a row (Illinois), to avoid one-sided stalls.
-        ga_new = jnp.where(feasible, gc, jnp.where(side == -1, 0.5 * ga, ga))
-        gb_new = jnp.where(feasible, jnp.where(side == 1, 0.5 * gb, gb), gc)
-        no_state_new = jnp.where(feasible, no_state, gc >= bisect_above)
-        return jnp.where(feasible, c, a), jnp.where(feasible, b, c), ga_new, gb_new, no_state_new, jnp.where(feasible, 1, -1), k + 1
-
-    start = (a, b, ga, gb, gb >= bisect_above, jnp.asarray(0), jnp.asarray(0))
-    a, *_ = jax.lax.while_loop(cond, body, start)
-    # Not bracketed: the search stopped at an end of the bracket, which is the answer.
-    return jnp.where(bracketed, a, jnp.where(up, hi, lo))
 
 
 def _scale(p: BudgetProblem, d: Mapping[str, Array], draws: _Draws) -> Array:
@@ -371,7 +86,7 @@ def _scale(p: BudgetProblem, d: Mapping[str, Array], draws: _Draws) -> Array:
 
     ds = jax.lax.stop_gradient(d)
     lo, hi = math.log(_BRACKET[0]), math.log(_BRACKET[1])
-    root = _bracketed_root(lambda x: g(x, ds), lo, hi, bisect_above=_NO_STATE)
+    root = bracketed_root(lambda x: g(x, ds), lo, hi, bisect_above=_NO_STATE)
     found = root
     log_s = jax.lax.stop_gradient(found)
     # Implicit-function theorem at the root: d(log s) = −∂g/∂d · dd / ∂g/∂(log s).

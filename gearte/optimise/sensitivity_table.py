@@ -12,7 +12,8 @@ from jaxtyping import PRNGKeyArray
 from ..core.units import UNIT_SYMBOLS, angle_from_rad
 from ..studies.montecarlo import TEStudy, as_key
 from ..studies.sensitivity import SobolIndices, sobol_indices
-from .budget import BudgetProblem, contributions
+from .budget import contributions
+from .budget_model import BudgetProblem
 
 
 class SensitivityTable(eqx.Module):
