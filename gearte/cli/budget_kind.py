@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import TYPE_CHECKING, Any
 
 import jax
@@ -16,7 +15,7 @@ from ..drives.protocol import Figure
 from ..optimise.budget import contributions, optimise_budget, pareto_front, uniform_scaling
 from ..optimise.budget_model import Constraint, budget_problem
 from ..optimise.costs import Exponential, GradeTable, Power, Reciprocal, ReciprocalSquare
-from ..optimise.statistics import MeanKSigma, Yield
+from ..optimise.statistics import MeanKSigma, Yield, binomial_se
 from ..standards.iso1328 import nearest_grade
 from ..studies.errors import ErrorModel, ErrorSource
 from ..studies.laws import FixedPhase, RelativePhase, UniformPhase
@@ -333,28 +332,27 @@ def _grade(spec: dict, tol_um: float):
         return f"none ({e})"
 
 
-def _binomial_se(p: float, n: int) -> float:
-    return math.sqrt(max(p * (1.0 - p), 0.0) / max(n, 1))
+def _constraints(b: dict) -> list[dict]:
+    """The budget's constraints as summary.json lists them (one built from the first's keys where there is one)."""
+    return b.get("constraints") or [{"metric": "the metric", "constraint": b["constraint"], "target": b.get("target_yield")}]
 
 
 def _yield_target(b: dict) -> float:
     """The yield whose binomial standard error the report states: the highest yield target among the constraints (the
     verified yield where there is none), so that a verified yield of 1 does not read as exact."""
-    cons = b.get("constraints") or [{"constraint": b["constraint"], "target": b.get("target_yield")}]
-    targets = [float(c["target"]) for c in cons if c["constraint"] == "yield"]
+    targets = [float(c["target"]) for c in _constraints(b) if c["constraint"] == "yield"]
     return max(targets) if targets else float(b["verified_yield"])
 
 
 def _below_target(b: dict) -> list[str]:
     """A warning for every yield constraint whose verified yield on the fresh sample is below its target."""
-    cons = b.get("constraints") or [{"metric": "the metric", "constraint": b["constraint"], "target": b.get("target_yield")}]
     yields = b.get("verified_yields") or [b["verified_yield"]]
     n = b["verified_samples"]
     out = []
-    for c, y in zip(cons, yields, strict=False):
+    for c, y in zip(_constraints(b), yields, strict=False):
         if c["constraint"] != "yield" or y >= c["target"]:
             continue
-        se = _binomial_se(c["target"], n)
+        se = binomial_se(c["target"], n)
         out.append(
             f"**Below its target on the fresh sample:** the yield of {c['metric']} is {y:.4f} against {c['target']:g}, "
             f"{(c['target'] - y) / se:.1f} binomial standard errors ({se:.4f} at the target for {n:,} samples) below it. "
@@ -418,7 +416,7 @@ def _report(study: Study, s: dict) -> list[str]:
         "",
         f"Cost {b['cost']:.4f} against {b['baseline_cost']:.4f} for the cheapest uniform scaling of the nominal tolerances "
         f"(× {b['baseline_scale']:.3f}); verified yield {b['verified_yield']:.5f} (baseline {b['baseline_verified_yield']:.5f}; "
-        f"± {_binomial_se(_yield_target(b), b['verified_samples']):.5f}, one binomial standard error at a yield of "
+        f"± {binomial_se(_yield_target(b), b['verified_samples']):.5f}, one binomial standard error at a yield of "
         f"{_yield_target(b):g} on {b['verified_samples']:,} fresh samples).",
         "",
     ]

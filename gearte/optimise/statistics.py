@@ -65,6 +65,11 @@ class AbstractStatistic(eqx.Module):
         """One line for reports."""
 
 
+def binomial_se(p: float, n: int) -> float:
+    """The standard error of a yield p estimated from n samples, √(p (1 − p) / n)."""
+    return math.sqrt(max(p * (1.0 - p), 0.0) / max(n, 1))
+
+
 class Yield(AbstractStatistic):
     """P(metric meets its spec) ≥ `target`: the target-quantile of the metric against the spec."""
 
@@ -86,7 +91,7 @@ class Yield(AbstractStatistic):
         if margin_samples is not None:
             # Four standard errors: the calibration and the verification samples each carry one
             # binomial error, so the verified yield clears the target with ~99.8 % probability.
-            t = min(t + 4 * math.sqrt(t * (1 - t) / margin_samples), 1 - 1.0 / margin_samples)
+            t = min(t + 4 * binomial_se(t, margin_samples), 1 - 1.0 / margin_samples)
         return float(np.quantile(x, 1.0 - t if lower else t))
 
     def describe(self) -> str:
