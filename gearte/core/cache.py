@@ -7,8 +7,13 @@ entry is never used). The `gearte` command turns the cache on by default, so tha
 of a study compiles nothing; ``gearte run … --no-compile-cache`` or the environment variable
 ``GEARTE_COMPILATION_CACHE=0`` turns it off. The test suite shares the same cache.
 
-Importing gearte changes no global state: a library user who wants the cache calls
-`enable_compilation_cache` once (it sets JAX's ``jax_compilation_cache_dir``).
+JAX's cache still traces and lowers every program before it looks it up; gearte's program store
+(`gearte.core.programs`, in the cache folder's ``gearte-programs`` subfolder) also keeps the
+Monte Carlo's compiled programs whole, so a repeat run skips that too.
+
+Importing gearte changes no global state: a library user who wants the caches calls
+`enable_compilation_cache` once (it sets JAX's ``jax_compilation_cache_dir`` and turns on the
+program store).
 
 Where (`default_cache_dir`): ``$GEARTE_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/gearte/jax``,
 else ``~/.cache/gearte/jax`` (``%LOCALAPPDATA%\\gearte\\jax`` on Windows). The folder holds only
@@ -43,12 +48,13 @@ def cache_wanted() -> bool:
     return os.environ.get("GEARTE_COMPILATION_CACHE", "1").strip().lower() not in _OFF
 
 
-def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> Path | None:
+def enable_compilation_cache(path: str | os.PathLike[str] | None = None, *, programs: bool = True) -> Path | None:
     """Turn on JAX's persistent compilation cache in `path` (default `default_cache_dir()`).
 
     Every compiled program is kept, however short its compilation (a study compiles many small
-    ones). Returns the folder, or None when it cannot be created or written (the cache then stays
-    off and gearte runs as without it).
+    ones). With `programs` (default), gearte's program store is turned on too, in the folder's
+    ``gearte-programs`` subfolder (`gearte.core.programs`). Returns the folder, or None when it
+    cannot be created or written (the caches then stay off and gearte runs as without them).
     """
     folder = Path(path).expanduser() if path is not None else default_cache_dir()
     try:
@@ -63,6 +69,10 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None) -> Path
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     jax.config.update("jax_compilation_cache_max_size", MAX_SIZE_BYTES)
+    if programs:
+        from .programs import enable_program_store
+
+        enable_program_store(folder / "gearte-programs")
     return folder
 
 

@@ -12,6 +12,7 @@ block, whatever the number of samples.
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import time
@@ -27,6 +28,7 @@ from tqdm import tqdm
 
 from ..core.metrics import AbstractMetric
 from ..core.precision import require_x64
+from ..core.programs import kept_program
 from ..drives.protocol import AbstractDrive, AbstractSinusoidalDrive
 from .errors import ErrorModel
 
@@ -131,10 +133,10 @@ def sample_mesh() -> jax.sharding.Mesh:
     return jax.sharding.Mesh(np.asarray(jax.devices()), ("samples",))
 
 
-@eqx.filter_jit
-def _run_step(fn, key, starts, block: int, mesh: jax.sharding.Mesh):
+def _step(fn_and_key, starts, block: int, mesh: jax.sharding.Mesh):
     """One block per device: device d computes the block starting at ``starts[d]`` with the same program,
     whatever the number of devices (`shard_map`), so results do not depend on the device count."""
+    fn, key = fn_and_key
     spec = jax.sharding.PartitionSpec("samples")
 
     def per_device(start):
@@ -142,6 +144,19 @@ def _run_step(fn, key, starts, block: int, mesh: jax.sharding.Mesh):
 
     # check_vma=False: drives loop with carries built from constants (no per-device type annotations needed).
     return jax.shard_map(per_device, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)(starts)
+
+
+_run_step = eqx.filter_jit(_step)
+
+
+def _step_program(fn, key, starts, block: int, mesh: jax.sharding.Mesh):
+    """The compiled step as a function of the step's starts: from the program store when one is in use
+    (`gearte.core.programs`: a repeat run neither traces nor lowers it), else `_run_step`."""
+    body = functools.partial(_step, block=block, mesh=mesh)
+    kept = kept_program("monte_carlo_step", body, (fn, key), starts, static=(block, mesh))
+    if kept is not None:
+        return lambda s: kept((fn, key), s)
+    return lambda s: _run_step((fn, key), s, block, mesh)
 
 
 def default_block_size(bytes_per_sample: int, *, budget_bytes: int = 128 * 2**20) -> int:
@@ -253,10 +268,14 @@ def monte_carlo(
     parts: list = []
     pending: list = []  # dispatched steps not yet handed on: (first sample, device result)
 
-    def launch(step: int):
+    def starts_of(step: int):
         starts = (np.arange(n_dev, dtype=np.uint32) + np.uint32(step * n_dev)) * np.uint32(block)
-        arr = jax.make_array_from_callback((n_dev,), sharding, lambda idx: starts[idx])
-        return _run_step(fn, key, arr, block, mesh)
+        return jax.make_array_from_callback((n_dev,), sharding, lambda idx: starts[idx])
+
+    run_step = _step_program(fn, key, starts_of(0), block, mesh)
+
+    def launch(step: int):
+        return run_step(starts_of(step))
 
     def hand_on(first: int, out) -> int:
         vals = _to_host(out)

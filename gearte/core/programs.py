@@ -1,0 +1,270 @@
+"""Compiled programs kept on disk whole, so that a repeat run neither traces nor lowers them.
+
+JAX's persistent compilation cache (`gearte.core.cache`) saves XLA's compilation, but every
+process still traces the Python model into a program and lowers it before it can look the
+program up: for the planetary Monte Carlo that is about 0.8 s of a 3 s repeat `gearte run`. The
+program store keeps the compiled executable itself (`jax.experimental.serialize_executable`),
+under a key computed without tracing, and loads it in about 0.15 s.
+
+The key must change whenever the program could, because nothing checks the loaded program
+against the model. It covers:
+
+- the source of every gearte module (a digest of the package's ``*.py`` files), and the versions
+  of Python, JAX, jaxlib, equinox and NumPy;
+- every JAX configuration value (float64, the PRNG implementation, …) except the caches' own
+  settings, ``XLA_FLAGS``, and the devices (platform, kind, id, process) and process count;
+- the program's inputs: the pytree structure with every static value (equinox modules' static
+  fields and every non-array leaf, by `repr`), and the shape and dtype of every array leaf
+  (array *values* are inputs of the program, not part of it).
+
+A program is kept only in a single-process run, and only when that key is trustworthy: every pytree node class comes from gearte,
+equinox, JAX or Python's builtins (a user's own class could call code whose source the digest does
+not cover), and no static value's `repr` hides its value (an object address ``at 0x…`` or a
+truncated array ``...``). Otherwise the program is compiled as usual, and nothing is kept.
+
+Files are ``<cache folder>/gearte-programs/<key>.program`` (written atomically; least recently
+used ones deleted beyond `MAX_STORE_BYTES`); an unreadable file is compiled again and replaced.
+Loading a program runs code from that file, as loading any cache of executables does: the folder
+is the user's own. `gearte.enable_compilation_cache` turns the store on with JAX's cache
+(``programs=False`` leaves it off); importing gearte leaves it off.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import pickle
+import sys
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import equinox as eqx
+import jax
+import numpy as np
+
+#: Size limit of the program store, bytes (least recently used programs are deleted beyond it).
+MAX_STORE_BYTES = 512 * 2**20
+#: Programs held in memory per process (a key's program is loaded or compiled once per process).
+MEMORY_PROGRAMS = 32
+
+_TRUSTED_MODULES = ("gearte", "equinox", "jax", "jaxlib", "builtins", "collections", "optimistix", "lineax", "diffrax")
+_SUFFIX = ".program"
+
+
+@functools.cache
+def _source_digest() -> str:
+    """A digest of every gearte source file (path and content)."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+@functools.cache
+def _versions() -> tuple[str, ...]:
+    from importlib.metadata import version
+
+    return (sys.version, jax.__version__, version("jaxlib"), eqx.__version__, np.__version__)
+
+
+def _environment() -> str:
+    """Everything outside the program's inputs that can change the compiled program."""
+    versions = _versions()
+    config = sorted((k, repr(v)) for k, v in jax.config.values.items() if "compilation_cache" not in k and "persistent_cache" not in k)
+    devices = [(d.platform, d.device_kind, d.id, d.process_index) for d in jax.devices()]
+    return repr((_source_digest(), versions, config, os.environ.get("XLA_FLAGS", ""), devices, jax.process_count()))
+
+
+def _node_types(treedef, found: set[type]) -> set[type]:
+    data = treedef.node_data()
+    if data is not None:
+        found.add(data[0])
+    for child in treedef.children():
+        _node_types(child, found)
+    return found
+
+
+def program_key(name: str, tree: Any, *static: Any) -> str | None:
+    """The store's key of program `name` for inputs `tree` (a pytree: arrays are inputs, everything else is
+    part of the program) and further `static` values; None when the key cannot be trusted (module notes)."""
+    leaves, treedef = jax.tree.flatten(tree)
+    for t in _node_types(treedef, set()):
+        if (getattr(t, "__module__", "") or "").split(".")[0] not in _TRUSTED_MODULES:
+            return None
+    parts = [name, _environment(), str(treedef), repr(static)]
+    for leaf in leaves:
+        if eqx.is_array(leaf):
+            aval = jax.typeof(leaf)
+            parts.append(f"array {aval.str_short()} weak={getattr(aval, 'weak_type', False)}")
+        else:
+            parts.append(f"{type(leaf).__module__}.{type(leaf).__qualname__} {leaf!r}")
+    text = "\n".join(parts)
+    if " at 0x" in text or "..." in text:
+        return None
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class ProgramStore:
+    """Compiled programs on disk in `folder`, and those of this process in memory."""
+
+    def __init__(self, folder: str | os.PathLike[str], *, max_bytes: int = MAX_STORE_BYTES):
+        self.folder = Path(folder)
+        self.max_bytes = int(max_bytes)
+        self._memory: dict[str, Any] = {}
+        self.loaded = 0  # programs read from disk by this process
+        self.saved = 0  # programs written to disk by this process
+
+    def _path(self, key: str) -> Path:
+        return self.folder / f"{key}{_SUFFIX}"
+
+    def load(self, key: str) -> Any | None:
+        """The compiled program of `key`, or None when none is kept (or its file cannot be read)."""
+        if key in self._memory:
+            return self._memory[key]
+        path = self._path(key)
+        try:
+            payload = path.read_bytes()
+        except OSError:
+            return None
+        try:
+            from jax.experimental import serialize_executable
+
+            blob, in_tree, out_tree = pickle.loads(payload)
+            compiled = serialize_executable.deserialize_and_load(blob, in_tree, out_tree)
+        except Exception:  # a damaged or foreign file: compile again (and replace it)
+            return None
+        try:
+            os.utime(path)  # recently used
+        except OSError:
+            pass
+        self.loaded += 1
+        self._remember(key, compiled)
+        return compiled
+
+    def save(self, key: str, compiled: Any) -> None:
+        """Keep `compiled` under `key` (in memory always; on disk when it can be written)."""
+        self._remember(key, compiled)
+        try:
+            from jax.experimental import serialize_executable
+
+            payload = pickle.dumps(serialize_executable.serialize(compiled))
+        except Exception:  # a program JAX cannot serialise: kept in memory only
+            return
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=self.folder, suffix=".tmp")
+            with os.fdopen(fd, "wb") as f:
+                f.write(payload)
+            os.replace(tmp, self._path(key))  # atomic: a reader sees the whole file or none
+        except OSError:
+            return
+        self.saved += 1
+        self._evict()
+
+    def _remember(self, key: str, compiled: Any) -> None:
+        self._memory[key] = compiled
+        while len(self._memory) > MEMORY_PROGRAMS:
+            self._memory.pop(next(iter(self._memory)))
+
+    def _evict(self) -> None:
+        try:
+            files = sorted(self.folder.glob(f"*{_SUFFIX}"), key=lambda p: p.stat().st_mtime)
+            total = sum(p.stat().st_size for p in files)
+            for p in files[:-1]:  # never the newest
+                if total <= self.max_bytes:
+                    break
+                total -= p.stat().st_size
+                p.unlink(missing_ok=True)
+        except OSError:
+            pass
+
+
+#: A compiler option at XLA's default value: it changes no code, only the key of JAX's cache (`_compile_fresh`).
+_OWN_KEY = {"xla_embed_ir_in_executable": False}
+_NEVER = 1e12  # s: a minimum compile time no compilation reaches
+
+
+def _compile_fresh(lowered) -> Any:
+    """`lowered` compiled by XLA, not loaded from JAX's persistent cache.
+
+    An executable JAX loaded from its cache cannot be serialised again on the CPU (it keeps no code
+    for its kernels: the copy would fail at its first run, "Function … not found"), so the store
+    keeps only executables it compiled. The option `_OWN_KEY` gives the compilation a key of JAX's
+    cache that JAX never writes (its minimum compile time is out of reach during the call), so the
+    cache never answers it.
+    """
+    before = jax.config.values["jax_persistent_cache_min_compile_time_secs"]
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", _NEVER)
+    try:
+        return lowered.compile(compiler_options=_OWN_KEY)
+    finally:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", before)
+
+
+_STORE: list[ProgramStore | None] = [None]
+
+
+def enable_program_store(folder: str | os.PathLike[str]) -> ProgramStore:
+    """Keep compiled programs in `folder` from now on (see the module notes); returns the store."""
+    store = _STORE[0]
+    if store is None or store.folder != Path(folder):
+        store = ProgramStore(folder)
+        _STORE[0] = store
+    return store
+
+
+def disable_program_store() -> None:
+    """Stop keeping and loading programs (what is on disk stays)."""
+    _STORE[0] = None
+
+
+def program_store() -> ProgramStore | None:
+    """The store in use, or None when programs are not kept."""
+    return _STORE[0]
+
+
+def kept_program(name: str, body: Callable[..., Any], tree: Any, *args: Any, static: tuple = ()) -> Callable[..., Any] | None:
+    """``body(tree, *args)`` compiled, from the program store when it holds it.
+
+    `tree`'s array leaves and `args` (arrays) are the program's inputs; every other value in `tree`
+    and `static` is part of it. Returns a function of ``(tree, *args)`` with the same array leaves'
+    shapes, or None when no store is in use or the key cannot be trusted (the caller then compiles
+    as usual).
+    """
+    store = _STORE[0]
+    if store is None or jax.process_count() > 1:  # one executable per process's devices: not shared through a file
+        return None
+    key = program_key(name, (tree, args), *static)
+    if key is None:
+        return None
+    dynamic, fixed = eqx.partition(tree, eqx.is_array)
+    leaves, treedef = jax.tree.flatten(dynamic)
+    compiled = store.load(key)
+    if compiled is None:
+
+        def flat(leaves, *args):
+            return body(eqx.combine(jax.tree.unflatten(treedef, leaves), fixed), *args)
+
+        compiled = _compile_fresh(jax.jit(flat).lower(leaves, *args))
+        store.save(key, compiled)
+
+    def run(tree, *args):
+        return compiled(jax.tree.leaves(eqx.filter(tree, eqx.is_array)), *args)
+
+    return run
+
+
+__all__ = (
+    "MAX_STORE_BYTES",
+    "ProgramStore",
+    "disable_program_store",
+    "enable_program_store",
+    "kept_program",
+    "program_key",
+    "program_store",
+)
