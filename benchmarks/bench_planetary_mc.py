@@ -761,8 +761,9 @@ def report(r: dict) -> str:
         "within the tolerance.",
         "- Baseline per-sample times are measured on a subset of samples, because the baseline at full density takes "
         "milliseconds per sample; its cost is linear in the number of samples.",
-        f"- End to end includes Python start-up, importing JAX, compiling (first run) or loading the compiled programs from "
-        f"gearte's compilation cache (later runs), the Monte Carlo, the histogram and trace plots, `samples.npz` (or, for the "
+        f"- End to end includes Python start-up, importing JAX, compiling (first run) or loading the compiled programs (later "
+        f"runs: the Monte Carlo's step whole from gearte's program store, `gearte.core.programs`, without tracing it; the "
+        f"others from JAX's compilation cache), the Monte Carlo, the histogram and trace plots, `samples.npz` (or, for the "
         f"streamed {e['large_samples']:,}-sample run, the streamed statistics), `summary.json` and `report.md`.",
         f"- Runs: gearte steady state {', '.join(f'{t:.3f}' for t in g['steady_state_all_s'])} s; end to end "
         f"{e['first_run_s']:.2f} s (first), {', '.join(f'{t:.2f}' for t in e['wall_s_all'])} s (cached); "
