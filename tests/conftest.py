@@ -19,6 +19,10 @@ from gearte.core.cache import default_cache_dir, enable_compilation_cache  # noq
 
 _CACHE = os.environ.get("GEARTE_TEST_JAX_CACHE") or str(default_cache_dir())
 os.environ["GEARTE_CACHE_DIR"] = _CACHE
+# gearte's program store (gearte.core.programs) off, here and in the commands the tests start: its key covers
+# gearte's source, so after every change of the source it would compile every Monte Carlo program of the suite
+# again from scratch, where JAX's cache still has most of them. tests/test_programs.py tests the store itself.
+os.environ["GEARTE_PROGRAM_STORE"] = "0"
 enable_compilation_cache(_CACHE)
 
 sys.path.insert(0, os.path.dirname(__file__))

@@ -154,3 +154,115 @@ def test_least_recently_used_programs_go_beyond_the_size_limit(tmp_path):
 def test_readme_states_the_store_size():
     readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
     assert f"at most {programs.MAX_STORE_BYTES // 2**20} MiB" in readme
+
+
+# ---------------------------------------------------------------- programs of any gearte function
+
+_FRESH_PROCESS = """
+import sys
+import jax, jax.numpy as jnp, numpy as np
+jax.config.update("jax_enable_x64", True)
+from gearte.core import programs
+programs.enable_program_store(sys.argv[1])
+
+def body(tree):
+    a, b = tree
+    return jnp.linalg.solve(a, b), jnp.linalg.cholesky(a), b  # LAPACK kernels, and an input handed back
+
+a = jnp.asarray(np.eye(3) * 4.0 + 1.0)
+b = jnp.asarray([1.0, 2.0, 3.0])
+unused = jnp.ones(5)
+run = programs.kept_program("lapack_test", lambda t: body(t[:2]), (a, b, unused), fallback=lambda t: body(t[:2]))
+out = run((a, b, unused))
+np.save(sys.argv[2], np.concatenate([np.ravel(np.asarray(x)) for x in out]))
+print(programs.program_store().loaded, programs.program_store().saved)
+"""
+
+
+def test_a_loaded_program_with_lapack_kernels_runs_in_a_fresh_process(tmp_path):
+    # A process that loads a program calling LAPACK (a linear solve, a Cholesky factor) without having lowered
+    # one itself used to crash: the kernels are set up before loading. Unused inputs and an input handed back
+    # as an output are part of the test (both change how JAX calls a compiled program).
+    import subprocess
+    import sys
+
+    script = tmp_path / "fresh.py"
+    script.write_text(_FRESH_PROCESS)
+    runs = []
+    for i in range(2):
+        p = subprocess.run(
+            [sys.executable, str(script), str(tmp_path / "store"), str(tmp_path / f"{i}.npy")], capture_output=True, text=True
+        )
+        assert p.returncode == 0, p.stderr[-2000:]
+        runs.append(p.stdout.split())
+    assert runs == [["0", "1"], ["1", "0"]]  # compiled and kept, then loaded
+    np.testing.assert_array_equal(np.load(tmp_path / "0.npy"), np.load(tmp_path / "1.npy"))
+
+
+def test_programs_that_call_the_host_stay_in_memory(store_at, tmp_path):
+    store = store_at()
+
+    def body(x):
+        return eqx.error_if(x, x > 10.0, "too large") * 2.0  # a run-time check: a callback into this process
+
+    x = jnp.ones(3)
+    out = programs.kept_program("callback_test", body, x, fallback=body)(x)
+    np.testing.assert_array_equal(out, 2.0 * np.ones(3))
+    assert store.saved == 0 and not list((tmp_path / "programs").glob("*.program"))
+    assert len(store._memory) == 1  # kept for this process
+    np.testing.assert_array_equal(programs.kept_program("callback_test", body, x, fallback=body)(x), out)
+    assert len(store._memory) == 1 and store.saved == 0
+
+
+@programs.kept_jit
+def _kept_example(a, n: int, *, scale: float = 2.0):
+    return {"value": jnp.sum(a) * scale, "count": n, "same": a}
+
+
+def test_kept_jit_is_filter_jit(store_at):
+    a = jnp.arange(4.0)
+    programs.disable_program_store()
+    reference = _kept_example(a, 3, scale=0.5)
+    store = store_at()
+    got = _kept_example(a, 3, scale=0.5)
+    assert got["count"] == 3 and float(got["value"]) == float(reference["value"]) == 3.0
+    np.testing.assert_array_equal(got["same"], a)
+    # A function of this test module: its source is not gearte's, so nothing is kept.
+    assert store.saved == 0
+    # Under a transformation it is equinox's filter_jit itself: gradients work.
+    np.testing.assert_allclose(jax.grad(lambda x: _kept_example(x, 1)["value"])(a), 2.0 * np.ones(4))
+
+
+def test_kept_jit_keeps_gearte_functions(store_at):
+    from gearte.drives.cycloid_pin_contact import sweep
+
+    s = load_study("examples/cycloid_yao2001_modified.toml")
+    angles = np.linspace(0.0, 0.2, 5)
+    programs.disable_program_store()
+    reference = sweep(s.drive, s.drive.reference, angles, normal=False)
+    store = store_at()
+    got = sweep(s.drive, s.drive.reference, angles, normal=False)
+    assert store.saved == 1
+    for r, g in zip(jax.tree.leaves(reference), jax.tree.leaves(got), strict=True):
+        np.testing.assert_array_equal(np.asarray(g), np.asarray(r))
+
+
+def test_environment_switch(monkeypatch, tmp_path):
+    from gearte.core.cache import enable_compilation_cache, programs_wanted
+
+    before = programs.program_store()
+    try:
+        for value, wanted in (("0", False), ("off", False), ("1", True), (" yes ", True)):
+            monkeypatch.setenv("GEARTE_PROGRAM_STORE", value)
+            assert programs_wanted() is wanted
+        monkeypatch.setenv("GEARTE_PROGRAM_STORE", "0")
+        programs.disable_program_store()
+        enable_compilation_cache(tmp_path / "jax")
+        assert programs.program_store() is None
+        monkeypatch.setenv("GEARTE_PROGRAM_STORE", "1")
+        enable_compilation_cache(tmp_path / "jax")
+        store = programs.program_store()
+        assert store is not None and store.folder == tmp_path / "jax" / "gearte-programs"
+    finally:
+        programs._STORE[0] = before
+        enable_compilation_cache(os.environ["GEARTE_CACHE_DIR"], programs=False)

@@ -48,14 +48,24 @@ def cache_wanted() -> bool:
     return os.environ.get("GEARTE_COMPILATION_CACHE", "1").strip().lower() not in _OFF
 
 
-def enable_compilation_cache(path: str | os.PathLike[str] | None = None, *, programs: bool = True) -> Path | None:
+def programs_wanted() -> bool:
+    """False when the environment turns the program store off (``GEARTE_PROGRAM_STORE=0``, ``off``, ``no`` or
+    ``false``; JAX's cache stays on). Worth it where gearte's source changes between runs, as in its own
+    test suite: every change of the source compiles the kept programs again, from scratch."""
+    return os.environ.get("GEARTE_PROGRAM_STORE", "1").strip().lower() not in _OFF
+
+
+def enable_compilation_cache(path: str | os.PathLike[str] | None = None, *, programs: bool | None = None) -> Path | None:
     """Turn on JAX's persistent compilation cache in `path` (default `default_cache_dir()`).
 
     Every compiled program is kept, however short its compilation (a study compiles many small
-    ones). With `programs` (default), gearte's program store is turned on too, in the folder's
-    ``gearte-programs`` subfolder (`gearte.core.programs`). Returns the folder, or None when it
-    cannot be created or written (the caches then stay off and gearte runs as without them).
+    ones). With `programs` (default: unless ``GEARTE_PROGRAM_STORE=0``, `programs_wanted`), gearte's
+    program store is turned on too, in the folder's ``gearte-programs`` subfolder
+    (`gearte.core.programs`). Returns the folder, or None when it cannot be created or written (the
+    caches then stay off and gearte runs as without them).
     """
+    if programs is None:
+        programs = programs_wanted()
     folder = Path(path).expanduser() if path is not None else default_cache_dir()
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -76,4 +86,4 @@ def enable_compilation_cache(path: str | os.PathLike[str] | None = None, *, prog
     return folder
 
 
-__all__ = ("MAX_SIZE_BYTES", "cache_wanted", "default_cache_dir", "enable_compilation_cache")
+__all__ = ("MAX_SIZE_BYTES", "cache_wanted", "default_cache_dir", "enable_compilation_cache", "programs_wanted")

@@ -14,13 +14,26 @@ against the model. It covers:
 - every JAX configuration value (float64, the PRNG implementation, …) except the caches' own
   settings, ``XLA_FLAGS``, and the devices (platform, kind, id, process) and process count;
 - the program's inputs: the pytree structure with every static value (equinox modules' static
-  fields and every non-array leaf, by `repr`), and the shape and dtype of every array leaf
-  (array *values* are inputs of the program, not part of it).
+  fields and every non-array leaf, by `repr`), and the shape, dtype and placement (sharding and
+  devices) of every array leaf (array *values* are inputs of the program, not part of it).
 
-A program is kept only in a single-process run, and only when that key is trustworthy: every pytree node class comes from gearte,
-equinox, JAX or Python's builtins (a user's own class could call code whose source the digest does
-not cover), and no static value's `repr` hides its value (an object address ``at 0x…`` or a
-truncated array ``...``). Otherwise the program is compiled as usual, and nothing is kept.
+Where it is used: the Monte Carlo engine's step (`gearte.monte_carlo`) and the gearte functions
+decorated with `kept_jit` (an `eqx.filter_jit` that goes through the store: the cycloid-pin
+reference analyses). A program is kept only
+
+- for the CPU, in a single-process run (an executable belongs to its process's devices; the
+  CPU's LAPACK kernels are set up before a program is loaded, as lowering one would);
+- when its key can be trusted: every pytree node class comes from gearte, equinox, JAX or
+  Python's builtins (a user's own class could call code whose source the digest does not cover),
+  and no static value's `repr` hides its value (an object address ``at 0x…`` or a truncated
+  array ``...``);
+- on disk only when it does not call back into Python (a callback, equinox's run-time errors):
+  such a program holds pointers into the process that compiled it, and stays in memory.
+
+Otherwise the program is compiled as usual. The store compiles its own copies, never taking
+one from JAX's cache (an executable JAX loaded from there cannot be serialised again on the CPU),
+keeps every input of a program (no unused-input pruning), and one thread at a time loads or
+compiles; a kept program that refuses its inputs is dropped and the usual compilation answers.
 
 Files are ``<cache folder>/gearte-programs/<key>.program`` (written atomically; least recently
 used ones deleted beyond `MAX_STORE_BYTES`); an unreadable file is compiled again and replaced.
@@ -33,17 +46,22 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import io
 import os
 import pickle
+import re
 import sys
 import tempfile
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
 
 #: Size limit of the program store, bytes (least recently used programs are deleted beyond it).
 MAX_STORE_BYTES = 512 * 2**20
@@ -100,13 +118,49 @@ def program_key(name: str, tree: Any, *static: Any) -> str | None:
     for leaf in leaves:
         if eqx.is_array(leaf):
             aval = jax.typeof(leaf)
-            parts.append(f"array {aval.str_short()} weak={getattr(aval, 'weak_type', False)}")
+            sharding = getattr(leaf, "sharding", None)  # a compiled program expects its inputs where they were
+            place = "host" if sharding is None else f"{sharding!r} on {sorted(d.id for d in sharding.device_set)}"
+            parts.append(f"array {aval.str_short()} weak={getattr(aval, 'weak_type', False)} {place}")
         else:
             parts.append(f"{type(leaf).__module__}.{type(leaf).__qualname__} {leaf!r}")
     text = "\n".join(parts)
     if " at 0x" in text or "..." in text:
         return None
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+@functools.cache
+def _prepare_kernels() -> None:
+    """Set up the CPU's LAPACK kernels, as lowering a linear-algebra operation does: a loaded program calls
+    them directly, and before this set-up they point nowhere (a process that loads a program with a Cholesky
+    factor or a linear solve without having lowered one itself would crash)."""
+    jax.jit(jnp.linalg.cholesky).lower(np.eye(2))
+
+
+def _equinox_missing() -> Any:
+    """equinox's marker of a module without wrapper fields in its flattened form (compared by identity when
+    a module is rebuilt, so a pickled structure must get the marker itself back, not a copy)."""
+    from equinox._module._flatten import MISSING
+
+    return MISSING
+
+
+class _Pickler(pickle.Pickler):
+    def reducer_override(self, obj):  # pyright: ignore[reportIncompatibleMethodOverride]
+        if type(obj).__name__ == "_Missing" and obj is _equinox_missing():
+            return (_equinox_missing, ())
+        return NotImplemented
+
+
+class _Program:
+    """A compiled program of a flat list of input arrays, and how its outputs are rebuilt: the structure of
+    their arrays and the outputs' other values (those a trace fixes)."""
+
+    def __init__(self, compiled: Any, out_treedef: Any, out_static: Any):
+        self.compiled, self.out_treedef, self.out_static = compiled, out_treedef, out_static
+
+    def __call__(self, leaves: list, *args: Any) -> Any:
+        return eqx.combine(jax.tree.unflatten(self.out_treedef, self.compiled(leaves, *args)), self.out_static)
 
 
 class ProgramStore:
@@ -134,8 +188,12 @@ class ProgramStore:
         try:
             from jax.experimental import serialize_executable
 
-            blob, in_tree, out_tree = pickle.loads(payload)
-            compiled = serialize_executable.deserialize_and_load(blob, in_tree, out_tree)
+            _prepare_kernels()
+            blob, in_tree, out_tree, device_ids, out_treedef, out_static = pickle.loads(payload)
+            by_id = {d.id: d for d in jax.devices()}
+            devices = [by_id[i] for i in device_ids]  # the program's own devices, in its order (default: all of them)
+            loaded = serialize_executable.deserialize_and_load(blob, in_tree, out_tree, execution_devices=devices)
+            compiled = _Program(loaded, out_treedef, out_static)
         except Exception:  # a damaged or foreign file: compile again (and replace it)
             return None
         try:
@@ -146,14 +204,20 @@ class ProgramStore:
         self._remember(key, compiled)
         return compiled
 
-    def save(self, key: str, compiled: Any) -> None:
-        """Keep `compiled` under `key` (in memory always; on disk when it can be written)."""
-        self._remember(key, compiled)
+    def save(self, key: str, program: _Program, *, disk: bool = True) -> None:
+        """Keep `program` under `key` (in memory always; with `disk`, on disk too when it can be written)."""
+        self._remember(key, program)
+        if not disk:
+            return
         try:
             from jax.experimental import serialize_executable
 
-            payload = pickle.dumps(serialize_executable.serialize(compiled))
-        except Exception:  # a program JAX cannot serialise: kept in memory only
+            with io.BytesIO() as buffer:
+                blob, in_tree, out_tree = serialize_executable.serialize(program.compiled)
+                device_ids = [d.id for d in program.compiled.runtime_executable().local_devices()]
+                _Pickler(buffer).dump((blob, in_tree, out_tree, device_ids, program.out_treedef, program.out_static))
+                payload = buffer.getvalue()
+        except Exception:  # a program JAX cannot serialise (or outputs pickle cannot keep): kept in memory only
             return
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
@@ -165,6 +229,14 @@ class ProgramStore:
             return
         self.saved += 1
         self._evict()
+
+    def forget(self, key: str) -> None:
+        """Drop the program of `key`, from memory and from disk."""
+        self._memory.pop(key, None)
+        try:
+            self._path(key).unlink(missing_ok=True)
+        except OSError:
+            pass
 
     def _remember(self, key: str, compiled: Any) -> None:
         self._memory[key] = compiled
@@ -184,6 +256,8 @@ class ProgramStore:
             pass
 
 
+#: A call of the host from a compiled program (`jax.pure_callback`, `jax.debug.callback`, equinox's `error_if`).
+_HOST_CALLBACK = re.compile(r"custom_call @\w*callback")
 #: A compiler option at XLA's default value: it changes no code, only the key of JAX's cache (`_compile_fresh`).
 _OWN_KEY = {"xla_embed_ir_in_executable": False}
 _NEVER = 1e12  # s: a minimum compile time no compilation reaches
@@ -207,6 +281,7 @@ def _compile_fresh(lowered) -> Any:
 
 
 _STORE: list[ProgramStore | None] = [None]
+_LOCK = threading.RLock()
 
 
 def enable_program_store(folder: str | os.PathLike[str]) -> ProgramStore:
@@ -228,35 +303,84 @@ def program_store() -> ProgramStore | None:
     return _STORE[0]
 
 
-def kept_program(name: str, body: Callable[..., Any], tree: Any, *args: Any, static: tuple = ()) -> Callable[..., Any] | None:
+def _load_or_compile(store: ProgramStore, key: str, body, treedef, fixed, leaves, args) -> _Program:
+    program = store.load(key)
+    if program is not None:
+        return program
+    traced: dict[str, Any] = {}
+
+    def flat(leaves, *args):
+        out = body(eqx.combine(jax.tree.unflatten(treedef, leaves), fixed), *args)
+        out_arrays, traced["static"] = eqx.partition(out, eqx.is_array)
+        arrays, traced["treedef"] = jax.tree.flatten(out_arrays)
+        return arrays
+
+    lowered = jax.jit(flat, keep_unused=True).lower(leaves, *args)  # loaded programs mishandle pruned inputs
+    program = _Program(_compile_fresh(lowered), traced["treedef"], traced["static"])
+    # A program that calls back into Python (equinox's run-time errors, callbacks) holds pointers to this
+    # process's functions: kept in memory, never on disk (another process would jump to nowhere).
+    store.save(key, program, disk=_HOST_CALLBACK.search(lowered.as_text()) is None)
+    return program
+
+
+def kept_program(
+    name: str, body: Callable[..., Any], tree: Any, *args: Any, static: tuple = (), fallback: Callable[..., Any]
+) -> Callable[..., Any]:
     """``body(tree, *args)`` compiled, from the program store when it holds it.
 
     `tree`'s array leaves and `args` (arrays) are the program's inputs; every other value in `tree`
-    and `static` is part of it. Returns a function of ``(tree, *args)`` with the same array leaves'
-    shapes, or None when no store is in use or the key cannot be trusted (the caller then compiles
-    as usual).
+    and `static` is part of it. Returns a function of ``(tree, *args)`` (same structure, same array
+    shapes, dtypes and placements): the kept program, or `fallback` (the same computation compiled
+    as usual) when no store is in use or the key cannot be trusted. A kept program that refuses its
+    inputs when called is dropped, and `fallback` answers.
     """
     store = _STORE[0]
-    if store is None or jax.process_count() > 1:  # one executable per process's devices: not shared through a file
-        return None
+    # One executable per process's devices (not shared through a file); CPU only (the kernels set up above).
+    if store is None or jax.process_count() > 1 or jax.default_backend() != "cpu":
+        return fallback
     key = program_key(name, (tree, args), *static)
     if key is None:
-        return None
+        return fallback
     dynamic, fixed = eqx.partition(tree, eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
-    compiled = store.load(key)
-    if compiled is None:
-
-        def flat(leaves, *args):
-            return body(eqx.combine(jax.tree.unflatten(treedef, leaves), fixed), *args)
-
-        compiled = _compile_fresh(jax.jit(flat).lower(leaves, *args))
-        store.save(key, compiled)
+    with _LOCK:  # one thread at a time loads or compiles (XLA's loading of executables is not thread-safe)
+        program = _load_or_compile(store, key, body, treedef, fixed, leaves, args)
+    failed = []
 
     def run(tree, *args):
-        return compiled(jax.tree.leaves(eqx.filter(tree, eqx.is_array)), *args)
+        if not failed:
+            try:
+                return program(jax.tree.leaves(eqx.filter(tree, eqx.is_array)), *args)
+            except Exception:  # e.g. inputs placed otherwise than the key said: never the user's concern
+                failed.append(True)
+                store.forget(key)
+        return fallback(tree, *args)
 
     return run
+
+
+def kept_jit(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """`eqx.filter_jit(fn)` whose compiled programs the program store keeps, for gearte's own module-level
+    functions: called with concrete values while a store is in use, a repeat run loads the program instead
+    of tracing `fn`; otherwise (no store, called under a trace or a transformation such as `jax.grad`, or a
+    key that cannot be trusted) it is `eqx.filter_jit(fn)` itself."""
+    jitted = eqx.filter_jit(fn)
+    name = f"{fn.__module__}.{fn.__qualname__}"
+    own = fn.__module__.split(".")[0] == "gearte" and "<locals>" not in fn.__qualname__ and not getattr(fn, "__closure__", None)
+
+    def body(tree):
+        args, kwargs = tree
+        return fn(*args, **kwargs)
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        if own and _STORE[0] is not None:
+            tree = (args, kwargs)
+            if not any(isinstance(x, Tracer) for x in jax.tree.leaves(tree)):
+                return kept_program(name, body, tree, fallback=lambda tree: jitted(*tree[0], **tree[1]))(tree)
+        return jitted(*args, **kwargs)
+
+    return call
 
 
 __all__ = (
@@ -264,6 +388,7 @@ __all__ = (
     "ProgramStore",
     "disable_program_store",
     "enable_program_store",
+    "kept_jit",
     "kept_program",
     "program_key",
     "program_store",

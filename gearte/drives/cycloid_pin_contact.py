@@ -22,6 +22,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ..core.precision import require_x64
+from ..core.programs import kept_jit
 from ..core.units import TWO_PI
 from ..core.validate import as_int
 from .cycloid_pin_geometry import UM, CycloidErrors, _placed_curve, _placement, _rot, checked_errors
@@ -237,12 +238,12 @@ def _analyse(drive: CycloidPin, err: CycloidErrors, theta_T, normal: bool) -> Cl
     )
 
 
-@eqx.filter_jit
+@kept_jit
 def _clearances_jit(drive, err, theta_T, normal):
     return _analyse(drive, err, theta_T, normal)
 
 
-@eqx.filter_jit
+@kept_jit
 def _sweep_jit(drive, err, thetas, normal):
     return jax.vmap(lambda t: _analyse(drive, err, t, normal))(thetas)
 
@@ -274,7 +275,7 @@ def sweep(drive: CycloidPin, errors: ErrorsLike, input_angles: ArrayLike, *, nor
     return _sweep_jit(drive, err, thetas, bool(normal))
 
 
-@eqx.filter_jit
+@kept_jit
 def _normal_jit(drive, err, theta_T, rotation):
     pins = _pins(drive, err, theta_T)
     return _normal(drive, err, pins, pins.phi, theta_T * (drive.z_pins / drive.z_lobes) + rotation)[0]

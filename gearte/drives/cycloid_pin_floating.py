@@ -61,6 +61,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ..core.precision import require_x64
+from ..core.programs import kept_jit
 from ..core.solution import RESULTS
 from ..core.units import MM_PER_UM, TWO_PI
 from ..core.validate import as_float
@@ -157,7 +158,7 @@ def _floating(drive: CycloidPin, err: CycloidErrors, thetas, clearance_mm) -> Fl
     )
 
 
-@eqx.filter_jit
+@kept_jit
 def _floating_jit(drive, err, thetas, clearance_mm):
     return _floating(drive, err, thetas, clearance_mm)
 

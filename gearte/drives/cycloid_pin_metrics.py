@@ -34,6 +34,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..core.metrics import AbstractMetric, Quantity
 from ..core.precision import require_x64
+from ..core.programs import kept_jit
 from .cycloid_pin_contact import Clearances, _analyse, _clearances_jit, _sweep_jit, loaded_pairs, smooth_loaded_pairs
 from .cycloid_pin_geometry import CycloidErrors, CycloidModification, checked_errors
 
@@ -191,7 +192,7 @@ def grid_metrics(drive: CycloidPin, err: CycloidErrors, positions) -> dict[str, 
     }
 
 
-@eqx.filter_jit
+@kept_jit
 def grid_metrics_jit(drive: CycloidPin, err: CycloidErrors, positions) -> dict[str, Array]:
     """`grid_metrics`, compiled."""
     return grid_metrics(drive, err, positions)

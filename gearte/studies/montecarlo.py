@@ -153,10 +153,9 @@ def _step_program(fn, key, starts, block: int, mesh: jax.sharding.Mesh):
     """The compiled step as a function of the step's starts: from the program store when one is in use
     (`gearte.core.programs`: a repeat run neither traces nor lowers it), else `_run_step`."""
     body = functools.partial(_step, block=block, mesh=mesh)
-    kept = kept_program("monte_carlo_step", body, (fn, key), starts, static=(block, mesh))
-    if kept is not None:
-        return lambda s: kept((fn, key), s)
-    return lambda s: _run_step((fn, key), s, block, mesh)
+    fallback = lambda tree, s: _run_step(tree, s, block, mesh)
+    kept = kept_program("monte_carlo_step", body, (fn, key), starts, static=(block, mesh), fallback=fallback)
+    return lambda s: kept((fn, key), s)
 
 
 def default_block_size(bytes_per_sample: int, *, budget_bytes: int = 128 * 2**20) -> int:
