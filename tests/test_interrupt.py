@@ -69,9 +69,10 @@ def test_signal_at_any_moment_keeps_the_previous_result(sig, delay, previous, tm
     shutil.copytree(previous, out)
     before = snapshot(out)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    # 900,000 samples: below the size that asks for --yes, and long enough (seconds) not to finish first.
+    # 2,700,000 samples: below the sizes that ask for --yes or stream the study, and long enough (seconds, on a
+    # machine where 900,000 samples once were and no longer are) not to finish before the last signal.
     p = subprocess.Popen(
-        [sys.executable, "-c", ENTRY, "run", str(RANDOM), "--out", str(out), "--samples", "900000", "--no-progress"],
+        [sys.executable, "-c", ENTRY, "run", str(RANDOM), "--out", str(out), "--samples", "2700000", "--no-progress"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
