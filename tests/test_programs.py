@@ -117,10 +117,23 @@ class _Opaque:
     pass
 
 
+class _Terse:
+    """A class of another package whose repr leaves its value out."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def __repr__(self):
+        return "Terse()"
+
+
 def test_untrusted_inputs_are_not_kept(study, store_at):
     assert programs.program_key("step", _Outside(study)) is None
     assert programs.program_key("step", (study, _Opaque())) is None  # repr at 0x…: its value is hidden
     assert programs.program_key("step", (study, "a ... b")) is None  # a truncated repr could hide a value
+    assert programs.program_key("step", (study, _Terse(1.0))) is None  # a class the key cannot see into
+    assert programs.program_key("step", study, {"inner": (_Terse(1.0),)}) is None  # also inside static values
+    assert programs.program_key("step", (study, np.float64(0.5), (1, "a"))) is not None  # NumPy and builtins
     programs.disable_program_store()
     reference = _values(_Outside(study))
     store = store_at()

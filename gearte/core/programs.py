@@ -23,8 +23,9 @@ reference analyses). A program is kept only
 
 - for the CPU, in a single-process run (an executable belongs to its process's devices; the
   CPU's LAPACK kernels are set up before a program is loaded, as lowering one would);
-- when its key can be trusted: every pytree node class comes from gearte, equinox, JAX or
-  Python's builtins (a user's own class could call code whose source the digest does not cover),
+- when its key can be trusted: every pytree node class, and the class of every static value, comes
+  from gearte, equinox, JAX, NumPy or Python's builtins (a user's own class could call code whose
+  source the digest does not cover, or leave a value out of its `repr`),
   and no static value's `repr` hides its value (an object address ``at 0x…`` or a truncated
   array ``...``);
 - on disk only when it does not call back into Python (a callback, equinox's run-time errors):
@@ -68,7 +69,7 @@ MAX_STORE_BYTES = 512 * 2**20
 #: Programs held in memory per process (a key's program is loaded or compiled once per process).
 MEMORY_PROGRAMS = 32
 
-_TRUSTED_MODULES = ("gearte", "equinox", "jax", "jaxlib", "builtins", "collections", "optimistix", "lineax", "diffrax")
+_TRUSTED_MODULES = ("gearte", "equinox", "jax", "jaxlib", "numpy", "builtins", "collections", "optimistix", "lineax", "diffrax")
 _SUFFIX = ".program"
 
 
@@ -98,10 +99,25 @@ def _environment() -> str:
     return repr((_source_digest(), versions, config, os.environ.get("XLA_FLAGS", ""), devices, jax.process_count()))
 
 
+def _value_types(value: Any, found: set[type]) -> set[type]:
+    """The types of `value` and, through tuples, lists, sets and dicts, of what it holds."""
+    found.add(type(value))
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _value_types(k, found)
+            _value_types(v, found)
+    elif isinstance(value, (tuple, list, set, frozenset)):
+        for v in value:
+            _value_types(v, found)
+    return found
+
+
 def _node_types(treedef, found: set[type]) -> set[type]:
+    """The classes of a pytree's nodes and of their static data (equinox modules' static fields)."""
     data = treedef.node_data()
     if data is not None:
         found.add(data[0])
+        _value_types(data[1], found)
     for child in treedef.children():
         _node_types(child, found)
     return found
@@ -111,7 +127,12 @@ def program_key(name: str, tree: Any, *static: Any) -> str | None:
     """The store's key of program `name` for inputs `tree` (a pytree: arrays are inputs, everything else is
     part of the program) and further `static` values; None when the key cannot be trusted (module notes)."""
     leaves, treedef = jax.tree.flatten(tree)
-    for t in _node_types(treedef, set()):
+    types = _node_types(treedef, set())
+    for leaf in leaves:
+        if not eqx.is_array(leaf):
+            _value_types(leaf, types)
+    _value_types(static, types)
+    for t in types:  # a class of another package could hide a value from its repr, or run code the digest misses
         if (getattr(t, "__module__", "") or "").split(".")[0] not in _TRUSTED_MODULES:
             return None
     parts = [name, _environment(), str(treedef), repr(static)]
@@ -156,8 +177,9 @@ class _Program:
     """A compiled program of a flat list of input arrays, and how its outputs are rebuilt: the structure of
     their arrays and the outputs' other values (those a trace fixes)."""
 
-    def __init__(self, compiled: Any, out_treedef: Any, out_static: Any):
+    def __init__(self, compiled: Any, out_treedef: Any, out_static: Any, *, lapack: bool = True):
         self.compiled, self.out_treedef, self.out_static = compiled, out_treedef, out_static
+        self.lapack = lapack  # calls LAPACK kernels (`_prepare_kernels` before it is loaded)
 
     def __call__(self, leaves: list, *args: Any) -> Any:
         return eqx.combine(jax.tree.unflatten(self.out_treedef, self.compiled(leaves, *args)), self.out_static)
@@ -188,8 +210,9 @@ class ProgramStore:
         try:
             from jax.experimental import serialize_executable
 
-            _prepare_kernels()
-            blob, in_tree, out_tree, device_ids, out_treedef, out_static = pickle.loads(payload)
+            blob, in_tree, out_tree, device_ids, lapack, out_treedef, out_static = pickle.loads(payload)
+            if lapack:
+                _prepare_kernels()
             by_id = {d.id: d for d in jax.devices()}
             devices = [by_id[i] for i in device_ids]  # the program's own devices, in its order (default: all of them)
             loaded = serialize_executable.deserialize_and_load(blob, in_tree, out_tree, execution_devices=devices)
@@ -215,7 +238,8 @@ class ProgramStore:
             with io.BytesIO() as buffer:
                 blob, in_tree, out_tree = serialize_executable.serialize(program.compiled)
                 device_ids = [d.id for d in program.compiled.runtime_executable().local_devices()]
-                _Pickler(buffer).dump((blob, in_tree, out_tree, device_ids, program.out_treedef, program.out_static))
+                record = (blob, in_tree, out_tree, device_ids, program.lapack, program.out_treedef, program.out_static)
+                _Pickler(buffer).dump(record)
                 payload = buffer.getvalue()
         except Exception:  # a program JAX cannot serialise (or outputs pickle cannot keep): kept in memory only
             return
@@ -315,11 +339,12 @@ def _load_or_compile(store: ProgramStore, key: str, body, treedef, fixed, leaves
         arrays, traced["treedef"] = jax.tree.flatten(out_arrays)
         return arrays
 
-    lowered = jax.jit(flat, keep_unused=True).lower(leaves, *args)  # loaded programs mishandle pruned inputs
-    program = _Program(_compile_fresh(lowered), traced["treedef"], traced["static"])
+    lowered = jax.jit(flat, keep_unused=True).lower(leaves, *args)  # every input the key describes, none pruned
+    text = lowered.as_text()
+    program = _Program(_compile_fresh(lowered), traced["treedef"], traced["static"], lapack="lapack" in text)
     # A program that calls back into Python (equinox's run-time errors, callbacks) holds pointers to this
     # process's functions: kept in memory, never on disk (another process would jump to nowhere).
-    store.save(key, program, disk=_HOST_CALLBACK.search(lowered.as_text()) is None)
+    store.save(key, program, disk=_HOST_CALLBACK.search(text) is None)
     return program
 
 
