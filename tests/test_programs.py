@@ -172,7 +172,8 @@ def test_readme_states_the_store_size():
 # ---------------------------------------------------------------- programs of any gearte function
 
 _FRESH_PROCESS = """
-import sys
+import os, sys
+os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"  # a one-device program among two devices
 import jax, jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
 from gearte.core import programs
@@ -188,14 +189,16 @@ unused = jnp.ones(5)
 run = programs.kept_program("lapack_test", lambda t: body(t[:2]), (a, b, unused), fallback=lambda t: body(t[:2]))
 out = run((a, b, unused))
 np.save(sys.argv[2], np.concatenate([np.ravel(np.asarray(x)) for x in out]))
-print(programs.program_store().loaded, programs.program_store().saved)
+store = programs.program_store()
+print(store.loaded, store.saved, len(store.refused))
 """
 
 
 def test_a_loaded_program_with_lapack_kernels_runs_in_a_fresh_process(tmp_path):
     # A process that loads a program calling LAPACK (a linear solve, a Cholesky factor) without having lowered
     # one itself used to crash: the kernels are set up before loading. Unused inputs and an input handed back
-    # as an output are part of the test (both change how JAX calls a compiled program).
+    # as an output are part of the test (both change how JAX calls a compiled program), and so are two
+    # devices: the loaded program must run on the one it was compiled for, not refuse its inputs.
     import subprocess
     import sys
 
@@ -208,7 +211,7 @@ def test_a_loaded_program_with_lapack_kernels_runs_in_a_fresh_process(tmp_path):
         )
         assert p.returncode == 0, p.stderr[-2000:]
         runs.append(p.stdout.split())
-    assert runs == [["0", "1"], ["1", "0"]]  # compiled and kept, then loaded
+    assert runs == [["0", "1", "0"], ["1", "0", "0"]]  # compiled and kept, then loaded and run (none refused)
     np.testing.assert_array_equal(np.load(tmp_path / "0.npy"), np.load(tmp_path / "1.npy"))
 
 
@@ -279,3 +282,30 @@ def test_environment_switch(monkeypatch, tmp_path):
     finally:
         programs._STORE[0] = before
         enable_compilation_cache(os.environ["GEARTE_CACHE_DIR"], programs=False)
+
+
+def test_a_program_that_refuses_its_inputs_is_dropped_for_good(store_at, tmp_path):
+    store = store_at()
+    x = jnp.arange(3.0)
+    calls = []
+
+    def body(x):
+        return x * 2.0
+
+    def fallback(x):
+        calls.append(1)
+        return body(x)
+
+    np.testing.assert_array_equal(programs.kept_program("refusal_test", body, x, fallback=fallback)(x), 2.0 * np.arange(3.0))
+    assert not calls and store.saved == 1
+    (key,) = store._memory
+
+    def refusing(*_):
+        raise RuntimeError("refuses its inputs")
+
+    store._memory[key].compiled = refusing  # what a program that no longer fits its inputs does
+    np.testing.assert_array_equal(programs.kept_program("refusal_test", body, x, fallback=fallback)(x), 2.0 * np.arange(3.0))
+    assert calls == [1] and key in store.refused and not list((tmp_path / "programs").glob("*.program"))
+    # From then on the usual compilation answers at once: nothing compiled or kept again for that key.
+    np.testing.assert_array_equal(programs.kept_program("refusal_test", body, x, fallback=fallback)(x), 2.0 * np.arange(3.0))
+    assert calls == [1, 1] and store.saved == 1 and key not in store._memory

@@ -9,7 +9,8 @@ of a study compiles nothing; ``gearte run … --no-compile-cache`` or the enviro
 
 JAX's cache still traces and lowers every program before it looks it up; gearte's program store
 (`gearte.core.programs`, in the cache folder's ``gearte-programs`` subfolder) also keeps the
-Monte Carlo's compiled programs whole, so a repeat run skips that too.
+Monte Carlo's compiled programs (and the cycloid-pin reference analyses) whole, so a repeat run
+skips that too. ``GEARTE_PROGRAM_STORE=0`` turns the store off alone (the test suite does).
 
 Importing gearte changes no global state: a library user who wants the caches calls
 `enable_compilation_cache` once (it sets JAX's ``jax_compilation_cache_dir`` and turns on the

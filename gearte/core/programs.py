@@ -34,7 +34,8 @@ reference analyses). A program is kept only
 Otherwise the program is compiled as usual. The store compiles its own copies, never taking
 one from JAX's cache (an executable JAX loaded from there cannot be serialised again on the CPU),
 keeps every input of a program (no unused-input pruning), and one thread at a time loads or
-compiles; a kept program that refuses its inputs is dropped and the usual compilation answers.
+compiles; a kept program that refuses its inputs is dropped, and the usual compilation answers for
+its key for the rest of the process.
 
 Files are ``<cache folder>/gearte-programs/<key>.program`` (written atomically; least recently
 used ones deleted beyond `MAX_STORE_BYTES`); an unreadable file is compiled again and replaced.
@@ -177,7 +178,7 @@ class _Program:
     """A compiled program of a flat list of input arrays, and how its outputs are rebuilt: the structure of
     their arrays and the outputs' other values (those a trace fixes)."""
 
-    def __init__(self, compiled: Any, out_treedef: Any, out_static: Any, *, lapack: bool = True):
+    def __init__(self, compiled: Any, out_treedef: Any, out_static: Any, *, lapack: bool):
         self.compiled, self.out_treedef, self.out_static = compiled, out_treedef, out_static
         self.lapack = lapack  # calls LAPACK kernels (`_prepare_kernels` before it is loaded)
 
@@ -192,6 +193,7 @@ class ProgramStore:
         self.folder = Path(folder)
         self.max_bytes = int(max_bytes)
         self._memory: dict[str, Any] = {}
+        self.refused: set[str] = set()  # keys whose program refused its inputs: compiled as usual from then on
         self.loaded = 0  # programs read from disk by this process
         self.saved = 0  # programs written to disk by this process
 
@@ -216,7 +218,7 @@ class ProgramStore:
             by_id = {d.id: d for d in jax.devices()}
             devices = [by_id[i] for i in device_ids]  # the program's own devices, in its order (default: all of them)
             loaded = serialize_executable.deserialize_and_load(blob, in_tree, out_tree, execution_devices=devices)
-            compiled = _Program(loaded, out_treedef, out_static)
+            compiled = _Program(loaded, out_treedef, out_static, lapack=lapack)
         except Exception:  # a damaged or foreign file: compile again (and replace it)
             return None
         try:
@@ -254,8 +256,9 @@ class ProgramStore:
         self.saved += 1
         self._evict()
 
-    def forget(self, key: str) -> None:
-        """Drop the program of `key`, from memory and from disk."""
+    def refuse(self, key: str) -> None:
+        """Drop the program of `key`, from memory and from disk, and keep none for it in this process."""
+        self.refused.add(key)
         self._memory.pop(key, None)
         try:
             self._path(key).unlink(missing_ok=True)
@@ -364,21 +367,22 @@ def kept_program(
     if store is None or jax.process_count() > 1 or jax.default_backend() != "cpu":
         return fallback
     key = program_key(name, (tree, args), *static)
-    if key is None:
+    if key is None or key in store.refused:
         return fallback
     dynamic, fixed = eqx.partition(tree, eqx.is_array)
     leaves, treedef = jax.tree.flatten(dynamic)
     with _LOCK:  # one thread at a time loads or compiles (XLA's loading of executables is not thread-safe)
         program = _load_or_compile(store, key, body, treedef, fixed, leaves, args)
-    failed = []
+    last = [tree, leaves]  # the input arrays of the last tree (a caller calls again with the same tree)
 
     def run(tree, *args):
-        if not failed:
+        if key not in store.refused:
+            if tree is not last[0]:
+                last[:] = [tree, jax.tree.leaves(eqx.filter(tree, eqx.is_array))]
             try:
-                return program(jax.tree.leaves(eqx.filter(tree, eqx.is_array)), *args)
+                return program(last[1], *args)
             except Exception:  # e.g. inputs placed otherwise than the key said: never the user's concern
-                failed.append(True)
-                store.forget(key)
+                store.refuse(key)
         return fallback(tree, *args)
 
     return run

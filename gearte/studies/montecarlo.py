@@ -154,8 +154,9 @@ def _step_program(fn, key, starts, block: int, mesh: jax.sharding.Mesh):
     (`gearte.core.programs`: a repeat run neither traces nor lowers it), else `_run_step`."""
     body = functools.partial(_step, block=block, mesh=mesh)
     fallback = lambda tree, s: _run_step(tree, s, block, mesh)
-    kept = kept_program("monte_carlo_step", body, (fn, key), starts, static=(block, mesh), fallback=fallback)
-    return lambda s: kept((fn, key), s)
+    tree = (fn, key)  # one tree for every step: the kept program takes its arrays once
+    kept = kept_program("monte_carlo_step", body, tree, starts, static=(block, mesh), fallback=fallback)
+    return lambda s: kept(tree, s)
 
 
 def default_block_size(bytes_per_sample: int, *, budget_bytes: int = 128 * 2**20) -> int:
