@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 from gearte import AbstractStiffnessModel, MeanStiffness, SinglePairStiffness, SlicedStiffness, TransverseStiffness
 from gearte.core.signal import evaluate
 from gearte.drives.helical import EXAMPLE, HelicalPlanetary, load_helical, wind_turbine_report
-from gearte.drives.helical_equations import MeshedSystem, loa_errors, stage_system
+from gearte.drives.helical_equations import MeshedSystem, contact_force, loa_errors, stage_system
 from gearte.drives.helical_geometry import geometry, iso6336_mesh_stiffness
 from gearte.drives.helical_modifications import PathRelief, StageModifications, ToothModification, crowning, flank_pair_relief
 from gearte.drives.helical_solve import PeriodicSolver, UnrolledExplicitRK, solve_periodic
@@ -426,6 +426,39 @@ def test_contact_law_is_a_smooth_max_within_its_stated_error():
         slope, np.asarray(jax.vmap(jax.grad(lambda xx: pair(xx, 0.0)))(jnp.asarray(x))), rtol=1e-12, atol=1e-13
     )  # ½(1 + z³/r³) cancels where x ≪ 0
     assert np.all((slope >= 0) & (slope <= 1)) and slope[60] == pytest.approx(0.5, rel=1e-15)
+
+
+def test_contact_force_derivatives_match_the_law_differentiated():
+    """`contact_force`'s written-out derivatives (its custom JVP, used in forward and reverse mode, and again for second
+    derivatives) against JAX's derivatives of the law written plainly, ½(x + (x⁴ + 16ℓ⁴)^¼) and ½(1 + x³/(x⁴ + 16ℓ⁴)^¾),
+    with respect to every argument, across the contact (x from far open to far closed)."""
+
+    def plain(x, xd, w, k, c, ell):
+        a = x**4 + 16.0 * ell**4
+        return k * w * 0.5 * (x + a**0.25) + c * w * 0.5 * (1.0 + x**3 / a**0.75) * xd
+
+    rng = np.random.default_rng(7)
+    n = 64
+    args = (
+        jnp.asarray(np.concatenate([-np.geomspace(1e-3, 30.0, n // 2), np.geomspace(1e-3, 30.0, n // 2)]) * 0.05),
+        jnp.asarray(rng.normal(0.0, 2.0, n)),
+        jnp.asarray(rng.uniform(0.1, 1.0, n)),
+        jnp.asarray(rng.uniform(0.5, 2.0, n)),
+        jnp.asarray(rng.uniform(0.01, 0.2, n)),
+        jnp.asarray(rng.uniform(0.01, 0.05, n)),
+    )
+    np.testing.assert_allclose(contact_force(*args), plain(*args), rtol=1e-13, atol=1e-15)
+    for i in range(6):
+        mine = jax.vmap(jax.grad(contact_force, argnums=i))(*args)
+        ref = jax.vmap(jax.grad(plain, argnums=i))(*args)
+        np.testing.assert_allclose(mine, ref, rtol=1e-10, atol=1e-12, err_msg=f"argument {i}")
+        tangent = tuple(jnp.ones(n) if j == i else jnp.zeros(n) for j in range(6))
+        np.testing.assert_allclose(jax.jvp(contact_force, args, tangent)[1], ref, rtol=1e-10, atol=1e-12, err_msg=f"argument {i}")
+    second = jax.vmap(jax.hessian(contact_force, argnums=(0, 1)))(*args)
+    second_ref = jax.vmap(jax.hessian(plain, argnums=(0, 1)))(*args)
+    for row, row_ref in zip(second, second_ref, strict=True):
+        for h, h_ref in zip(row, row_ref, strict=True):
+            np.testing.assert_allclose(h, h_ref, rtol=1e-8, atol=1e-8)
 
 
 def test_constant_stiffness_and_no_excitation_give_no_fluctuation(model, response):

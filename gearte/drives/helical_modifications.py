@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -161,13 +162,15 @@ class PathRelief(eqx.Module):
         shape = (u.shape[0],) + (1,) * (u.ndim - 1)
         path_length = jnp.broadcast_to(jnp.asarray(path_length, dtype=float), (u.shape[0],))
         g = jnp.reshape(path_length, shape)
-        out = jnp.zeros_like(u)
+        forms, amounts = [], []
         for term, d in enumerate((u, u, g - u, g - u)):
             col = [jnp.reshape(a[:, term], shape) for a in (self.amount, self.length, self.inverse_length, self.square)]
             amount, length, inverse, square = col
             t = jnp.maximum(length - d, 0.0) * inverse
-            out = out + amount * t * (1.0 + square * (t - 1.0))
-        return out
+            forms.append(t * (1.0 + square * (t - 1.0)))
+            amounts.append(amount)
+        forms = jax.lax.optimization_barrier(forms)
+        return sum(a * f for a, f in zip(amounts, forms, strict=True))
 
 
 def crowning(first: ToothModification, last: ToothModification, z, face_width):
