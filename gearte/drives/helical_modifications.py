@@ -169,8 +169,13 @@ class PathRelief(eqx.Module):
             t = jnp.maximum(length - d, 0.0) * inverse
             forms.append(t * (1.0 + square * (t - 1.0)))
             amounts.append(amount)
+        # Kept once computed: in a gradient through an ODE solve, XLA otherwise recomputes these shapes (from τ through
+        # the pair positions) inside every fused kernel that sums the amounts' gradient (docs/helical.md).
         forms = jax.lax.optimization_barrier(forms)
-        return sum(a * f for a, f in zip(amounts, forms, strict=True))
+        out = jnp.zeros_like(u)
+        for a, f in zip(amounts, forms, strict=True):
+            out = out + a * f
+        return out
 
 
 def crowning(first: ToothModification, last: ToothModification, z, face_width):
