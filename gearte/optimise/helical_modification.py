@@ -248,7 +248,7 @@ class ModificationSolution(eqx.Module):
     - `fluctuation`: (external, internal) sampled peak-to-peak fluctuations at `amounts`, µm (a direct run).
     - `result`: a `gearte.RESULTS` item; `num_steps`: BFGS steps.
     - `evaluations`: objective-and-gradient evaluations, each one ODE solve with its reverse-mode adjoint
-      (≈ 3 forward solves): optimistix's BFGS makes one per step (`jax.linearize` of the objective at the
+      (≈ 4 forward solves, `benchmarks/results/helical.md`): optimistix's BFGS makes one per step (`jax.linearize` of the objective at the
       step's point), so this is `num_steps`.
     """
 
