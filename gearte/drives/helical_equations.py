@@ -63,26 +63,31 @@ def contact_force(x, xd, w, k, c, ell):
     differentiated by JAX, the law's derivative is an expression that XLA recomputes inside every fused kernel of a
     gradient through the ODE solve that needs it (the reverse pass of the wind-turbine example went from 6.5 to 4.5
     forward solves with this rule; the values are the same to rounding, tests compare them)."""
-    smooth_max, slope, _, _ = _smooth_max(x, ell)
-    return k * w * ell * smooth_max + c * w * slope * xd
+    return _law(x, xd, w, k, c, ell)[0]
+
+
+def _law(x, xd, w, k, c, ell):
+    """The force, and what its derivatives are made of: (force, elastic ℓ max_ℓ(x), viscous max_ℓ′(x) ẋ, max_ℓ(x), its
+    slope, z, r); one formula for the value with and without derivatives, so that both are the same to the bit."""
+    smooth_max, slope, z, r = _smooth_max(x, ell)
+    elastic, viscous = ell * smooth_max, slope * xd
+    return w * (k * elastic + c * viscous), elastic, viscous, smooth_max, slope, z, r
 
 
 @contact_force.defjvp
 def _contact_force_jvp(primals, tangents):
     x, xd, w, k, c, ell = primals
     dx, dxd, dw, dk, dc, dell = tangents
-    smooth_max, slope, z, r = _smooth_max(x, ell)
+    out, elastic, viscous, smooth_max, slope, z, r = _law(x, xd, w, k, c, ell)
     # d slope/dz = 24 z²/r⁷ (r⁴ = z⁴ + 16): the curvature of max_ℓ, per µm of x.
     r2 = r * r
     curvature = 24.0 * z * z / (r * r2 * r2 * r2) / ell
-    elastic, viscous = ell * smooth_max, slope * xd
     d_x = w * (k * slope + c * curvature * xd)
     d_xd = c * w * slope
     d_w = k * elastic + c * viscous
     d_x, d_xd, d_w = jax.lax.optimization_barrier((d_x, d_xd, d_w))
     # ∂/∂ℓ: ℓ max_ℓ(x) → max_ℓ − z slope; slope → −curvature z.
     d_ell = w * (k * (smooth_max - z * slope) - c * curvature * z * xd)
-    out = w * (k * elastic + c * viscous)
     return out, d_x * dx + d_xd * dxd + d_w * dw + w * (elastic * dk + viscous * dc) + d_ell * dell
 
 

@@ -248,8 +248,8 @@ class ModificationSolution(eqx.Module):
     - `fluctuation`: (external, internal) sampled peak-to-peak fluctuations at `amounts`, µm (a direct run).
     - `result`: a `gearte.RESULTS` item; `num_steps`: BFGS steps.
     - `evaluations`: objective-and-gradient evaluations, each one ODE solve with its reverse-mode adjoint
-      (≈ 4 forward solves, `benchmarks/results/helical.md`): optimistix's BFGS makes one per step (`jax.linearize` of the objective at the
-      step's point), so this is `num_steps`.
+      (≈ 4 forward solves, `benchmarks/results/helical.md`): optimistix's BFGS makes one per step
+      (`jax.linearize` of the objective at the step's point), so this is `num_steps`.
     """
 
     amounts: Float[Array, " 4"]
