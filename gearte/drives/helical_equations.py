@@ -148,16 +148,20 @@ class MeshedSystem(eqx.Module):
 
 
 class LOAErrors(eqx.Module):
-    """Eccentricity errors as LOA displacement excitation (µm, > 0 adds material), every mesh, at τ.
+    """Eccentricity errors as displacement excitation along the contact normal (µm, > 0 adds material), every mesh, at τ.
 
     The same sources, phases and frequencies as `Planetary2KH` (Wang et al. 2013, Table 2) for carrier
-    input, ring fixed: e_w (sun–planet) and e_n (planet–ring) of each planet; e = −e_w, −e_n here,
-    so that with rigid meshes the sun turns by Planetary2KH's output error.
+    input, ring fixed: e_w (sun–planet) and e_n (planet–ring) of each planet, which are displacements along the
+    *transverse* line of action; e = −e_w, −e_n there. An eccentricity moves a gear in its transverse plane, and a
+    transverse displacement δ along the base tangent closes a helical mesh by δ cos β_b along its normal: the
+    excitation is e cos β_b, so that with rigid meshes the sun turns by Planetary2KH's output error (a
+    spur model; its TE is that of the transverse line of action).
     """
 
     errors: dict
     planet_angles: Float[Array, " n"]
     pressure_angle: Float[Array, ""]
+    cos_base_helix: Float[Array, ""]
     frequencies: tuple[tuple[str, float], ...] = eqx.field(static=True)
     carrier_turns_per_mesh: float = eqx.field(static=True)
 
@@ -181,7 +185,7 @@ class LOAErrors(eqx.Module):
         )
         e_n = s("planet_manufacturing", True, -a) + s("ring_manufacturing", False, -a - eta) + s("planet_assembly", True, -a)
         e_n = e_n + s("carrier_assembly", False, -a - eta)
-        return jnp.concatenate([-e_w, -e_n])
+        return jnp.concatenate([-e_w, -e_n]) * self.cos_base_helix
 
 
 def error_sources(n_planets: int) -> dict[str, SourceSpec]:
@@ -216,7 +220,12 @@ def loa_errors(stage: HelicalStage, geom: Geometry, errors: Mapping[str, Eccentr
         "carrier_assembly": -w["carrier"],
     }
     return LOAErrors(
-        full, stage.planet_angles, geom.transverse_pressure_angle, tuple((k, float(v)) for k, v in freq.items()), 1.0 / stage.z_ring
+        full,
+        stage.planet_angles,
+        geom.transverse_pressure_angle,
+        jnp.cos(geom.base_helix_angle),
+        tuple((k, float(v)) for k, v in freq.items()),
+        1.0 / stage.z_ring,
     )
 
 
