@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..core import linalg
 from .helical_geometry import Geometry, HelicalStage, geometry
 from .helical_modifications import StageModifications
 from .helical_stiffness import AbstractStiffnessModel, SlicedMeshes, SlicedStiffness, check_stiffness_model, pair_range, slice_centres
@@ -136,14 +137,16 @@ class MeshedSystem(eqx.Module):
         Newton iterations on the unilateral contact law (no velocity)."""
         gap, w = self.excitation(tau)
         rhs = self.load - self.projection.T @ (self.pair_stiffness * jnp.sum(w * gap, axis=-1))
-        q = jnp.linalg.solve(self.linear_stiffness(tau), rhs)
+        # K̂ and the Newton Jacobian are symmetric positive definite (supports, springs, a contact law that never
+        # softens): gearte.core.linalg, whose solves cannot hang a batch on several CPU devices as LAPACK's can.
+        q = linalg.solve_spd(self.linear_stiffness(tau), rhs[:, None])[:, 0]
 
         def residual(q):
             f = jnp.sum(self.pair_forces(tau, q, jnp.zeros_like(q)), axis=-1)
             return self.stiffness @ q + self.projection.T @ f - self.load
 
         for _ in range(newton_steps):
-            q = q - jnp.linalg.solve(jax.jacfwd(residual)(q), residual(q))
+            q = q - linalg.solve_spd(jax.jacfwd(residual)(q), residual(q)[:, None])[:, 0]
         return q
 
 

@@ -56,6 +56,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..core import linalg
 from ..core.solution import RESULTS
 
 #: Faces of the polygon that stands for a bearing's clearance circle.
@@ -267,11 +268,13 @@ def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium
     s = eqx.tree_at(lambda t: t.f, s, s.f + s.mu * start)
     ss = jax.tree.map(jax.lax.stop_gradient, s)
     q_star, ok, steps = _newton_each(ss, start)
-    cho = (jax.lax.stop_gradient(jnp.linalg.cholesky(hessian(ss, q_star))), True)
+    # Batched over samples and angles under `vmap`: gearte.core.linalg, not LAPACK, whose batched kernels can hang
+    # a run on several CPU devices (see that module). (Inside `_newton_each` a solve is one matrix: LAPACK's.)
+    low = jax.lax.stop_gradient(linalg.cholesky(hessian(ss, q_star)))
     # One Newton step with the Hessian held: the value stays, the derivative is the implicit one.
-    q = q_star - jax.scipy.linalg.cho_solve(cho, gradient(s, q_star))
+    q = q_star - linalg.cho_solve(low, gradient(s, q_star)[:, None])[:, 0]
     # The rigid limit: remove the part of q proportional to the load for the closed contacts.
-    q_rigid = q - jax.scipy.linalg.cho_solve(cho, s.f - s.mu * start)
+    q_rigid = q - linalg.cho_solve(low, (s.f - s.mu * start)[:, None])[:, 0]
     force = s.k * jnp.maximum(s.G @ q + s.e, 0.0)
     _, bf, _ = _bearing_local(s, _relative(s, q))
     b2 = jnp.sum(bf * bf, axis=-1)
