@@ -180,6 +180,7 @@ def check_file(path: str | Path, *, samples: int | None = None, seed: int | None
 def build_study(raw: dict, source: str, *, samples: int | None = None, seed: int | None = None) -> Study:
     """A `Study` from parsed TOML (`source` names it in messages and reports)."""
     top, st, dt, h = _read_file(raw, samples=samples, seed=seed)
+    dt.folder = Path(source).parent  # file names in [drive] are relative to the study file
     # Everything from here on builds JAX objects (the drive, its metrics, the error laws, the study kinds).
     from ..drives.registry import DRIVES
     from ..studies.montecarlo import DEFAULT_SAMPLES

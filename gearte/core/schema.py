@@ -11,6 +11,7 @@ from __future__ import annotations
 import difflib
 import math
 import re
+from pathlib import Path
 from typing import Any
 
 
@@ -24,10 +25,22 @@ _MISSING = object()
 class Table:
     """A TOML table being read: tracks which keys were used, so leftovers are reported."""
 
-    def __init__(self, data: Any, where: str):
+    def __init__(self, data: Any, where: str, *, folder: Path | None = None):
         if not isinstance(data, dict):
             raise ConfigError(f"{where}: expected a table (key = value pairs), got {type(data).__name__}")
         self.data, self.where, self.used = data, where, set()
+        #: The study file's folder (file names in the table are relative to it); None: the working directory.
+        self.folder = folder
+
+    def path(self, key: str, default: Any = _MISSING) -> Path:
+        """A file name, relative to the study file's folder (`folder`); the file must exist."""
+        v = self.string(key, default)
+        p = Path(v)
+        if not p.is_absolute() and self.folder is not None:
+            p = self.folder / p
+        if not p.is_file():
+            self._fail(key, f"no file {str(p)!r}; give a path relative to the study file's folder")
+        return p
 
     def _fail(self, key: str, msg: str):
         raise ConfigError(f"{self.where} {key}: {msg}")
@@ -112,7 +125,7 @@ class Table:
         if v is default and default is not _MISSING:
             return v
         where = f"{self.where[:-1]}.{key}]" if self.where.startswith("[") and self.where.endswith("]") else f"[{key}]"
-        return Table(v, where)
+        return Table(v, where, folder=self.folder)
 
     def finish(self) -> None:
         unknown = [k for k in self.data if k not in self.used]
