@@ -56,6 +56,7 @@ GROUPS = {
     "test_doe_cli": "doe",
     "test_helical": "helical",
     "test_helical_modification": "helical",
+    "test_helical_drive": "helical",
     "test_rv": "rv",
     "test_rv_outputs": "rv",
 }

@@ -5,6 +5,7 @@ from __future__ import annotations
 from .cycloid_pin import CycloidPin
 from .explicit import ExplicitDrive
 from .harmonic import HarmonicDrive
+from .helical_drive import HelicalPlanetaryDrive
 from .planetary_2kh import Planetary2KH
 from .protocol import AbstractDrive
 from .rv_khv import RVKHV
@@ -17,5 +18,6 @@ DRIVES: dict[str, type[AbstractDrive]] = {
         HarmonicDrive,
         CycloidPin,
         RVKHV,
+        HelicalPlanetaryDrive,
     )
 }
