@@ -69,12 +69,13 @@ if TYPE_CHECKING:
         ExplicitTerm as ExplicitTerm,
         HarmonicDrive as HarmonicDrive,
         HarmonicSource as HarmonicSource,
+        HelicalPlanetaryDrive as HelicalPlanetaryDrive,
+        HelicalResponse as HelicalResponse,
         Planetary2KH as Planetary2KH,
         SourceSpec as SourceSpec,
     )
     from .drives.rv_khv import RVKHV as RVKHV, RVResponse as RVResponse
     from .drives.helical import DynamicResponse as DynamicResponse, HelicalPlanetary as HelicalPlanetary, load_helical as load_helical
-    from .drives.helical_drive import HelicalPlanetaryDrive as HelicalPlanetaryDrive, HelicalResponse as HelicalResponse
     from .drives.helical_geometry import HelicalStage as HelicalStage
     from .drives.helical_modifications import (
         StageModifications as StageModifications,
@@ -271,8 +272,8 @@ _LAZY: dict[str, str] = {
     "RVKHV": ".drives.rv_khv",
     "RVResponse": ".drives.rv_khv",
     "load_helical": ".drives.helical",
-    "HelicalPlanetaryDrive": ".drives.helical_drive",
-    "HelicalResponse": ".drives.helical_drive",
+    "HelicalPlanetaryDrive": ".drives",
+    "HelicalResponse": ".drives",
     "HelicalStage": ".drives.helical_geometry",
     "StageModifications": ".drives.helical_modifications",
     "ToothModification": ".drives.helical_modifications",

@@ -34,6 +34,7 @@ from .protocol import (
     StudyOutputs as StudyOutputs,
     Trace as Trace,
 )
+from .helical_drive import HelicalPlanetaryDrive as HelicalPlanetaryDrive, HelicalResponse as HelicalResponse
 from .registry import DRIVES as DRIVES
 from .rv_khv import RVKHV as RVKHV, RVResponse as RVResponse
 
