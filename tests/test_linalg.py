@@ -23,26 +23,30 @@ def _spd(rng, batch, n, cond=1e-2):
     return a @ np.swapaxes(a, -1, -2) + cond * n * np.eye(n)
 
 
+# Three shapes (each compiles once), any values: a batch of two, a single matrix, a batch of 2 × 3.
+SHAPES = [((2,), 6, 3), ((), 1, 1), ((2, 3), 12, 2)]
+
+
 @settings(max_examples=15, deadline=None)
-@given(n=st.integers(1, 12), batch=st.lists(st.integers(1, 3), max_size=2), r=st.integers(1, 4), seed=st.integers(0, 2**16))
-def test_factor_and_solves_are_lapacks(n, batch, r, seed):
+@given(shape=st.sampled_from(SHAPES), seed=st.integers(0, 2**16))
+def test_factor_and_solves_are_lapacks(shape, seed):
+    batch, n, r = shape
     rng = np.random.default_rng(seed)
     k, b = _spd(rng, batch, n), rng.normal(size=(*batch, n, r))
-    low = np.asarray(linalg.cholesky(jnp.asarray(k)))
     ref = np.linalg.cholesky(k)
+    low, x, xl, xu = (np.asarray(v) for v in _all(jnp.asarray(k), jnp.asarray(b), jnp.asarray(ref)))
     np.testing.assert_allclose(low, ref, rtol=0, atol=1e-13 * np.max(np.abs(ref)))
     assert np.all(np.triu(low, 1) == 0.0)  # a lower factor: nothing above the diagonal
-    x = np.asarray(linalg.solve_spd(jnp.asarray(k), jnp.asarray(b)))
     xr = np.linalg.solve(k, b)
     # the solves' rounding grows with the condition number: compare with the residual's scale
     np.testing.assert_allclose(x, xr, rtol=0, atol=1e-12 * np.linalg.cond(k).max() * np.max(np.abs(xr)))
-    np.testing.assert_allclose(
-        np.asarray(linalg.solve_lower(jnp.asarray(ref), jnp.asarray(b))), np.linalg.solve(ref, b), rtol=1e-10, atol=1e-12
-    )
-    up = np.swapaxes(ref, -1, -2)
-    np.testing.assert_allclose(
-        np.asarray(linalg.solve_lower_transposed(jnp.asarray(ref), jnp.asarray(b))), np.linalg.solve(up, b), rtol=1e-10, atol=1e-12
-    )
+    np.testing.assert_allclose(xl, np.linalg.solve(ref, b), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(xu, np.linalg.solve(np.swapaxes(ref, -1, -2), b), rtol=1e-10, atol=1e-12)
+
+
+@jax.jit
+def _all(k, b, ref):
+    return linalg.cholesky(k), linalg.solve_spd(k, b), linalg.solve_lower(ref, b), linalg.solve_lower_transposed(ref, b)
 
 
 def test_not_positive_definite_gives_nan():
