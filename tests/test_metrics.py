@@ -77,7 +77,7 @@ def test_evaluate_matches_plain_sum(comp, gain):
 # the amplitudes, invariant to a shift of the input angle) are checked on the same drawn
 # structure, so each of the 25 examples compiles once instead of three times. Derandomized
 # (as the study-file fuzzing is): every run draws the same 25 structures, so the persistent
-# compilation cache serves them (about 20 s warm instead of 50 s, where fresh structures each
+# compilation cache serves them (10 s warm, measured, instead of 51 s, where fresh structures each
 # compile anew on every run).
 @settings(max_examples=25, deadline=None, derandomize=True, database=None)
 @given(components(), st.floats(0.05, 20.0), st.floats(-100.0, 100.0))

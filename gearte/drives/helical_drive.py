@@ -15,7 +15,8 @@ grid over a window of carrier turns, and the DTE of every mesh at mid face. Two 
   error-free stage and the influence of each mesh's excitation on the TE are computed once per compiled call,
   and a unit costs one sum per angle (no solve).
 - `Dynamic()`: the ODE of the stage (`gearte.drives.helical_solve`) integrated over the window after settling
-  mesh periods, every unit one ODE solve (Tsit5 at `steps_per_mesh_period` steps per mesh period: for a few units).
+  mesh periods, every unit one ODE solve (Tsit5, `steps_per_mesh_period` steps per mesh period): far slower than
+  `QuasiStatic`, meant for a few units.
 
 Both give the TE of the error-free stage too (`HelicalResponse.te_nominal`): with the time-varying mesh
 stiffness a stage has a TE without errors; the metric ``error_peak_to_peak`` takes the errors' share alone.
