@@ -2,6 +2,7 @@ import gc
 import os
 import sys
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import pytest
@@ -68,22 +69,37 @@ NOTEBOOK_GROUPS = {
     "identify_and_assemble.ipynb": "identification",
     "planetary_wang2013.ipynb": "planetary",
     "helical_modification.ipynb": "helical",
+    "rv_reducer.ipynb": "rv",
 }
-#: Rough cost of each group (s, one worker, empty compilation cache): only their order matters.
+#: Cost of each group (s, one worker, warm compilation cache; measured, rounded): only their order matters.
 COST_S = {
-    "cycloid": 230,
-    "planetary_optimise": 225,
-    "identification": 120,
-    "harmonic": 130,
-    "helical": 130,
-    "rv": 120,
-    "test_contract": 105,
-    "doe": 45,
-    "planetary": 75,
-    "test_metrics": 30,
-    "test_fuzz_study_files": 25,
-    "test_cli": 24,
-    "test_interrupt": 23,
+    "cycloid": 155,
+    "rv": 150,
+    "helical": 120,
+    "planetary_optimise": 110,
+    "planetary": 80,
+    "harmonic": 80,
+    "identification": 75,
+    "test_fuzz_study_files": 43,
+    "test_programs": 36,
+    "test_metrics": 25,
+    "test_contract": 23,
+    "test_cli": 22,
+    "test_interrupt": 19,
+    "doe": 18,
+    "test_costs": 10,
+    "test_bad_input": 9,
+}
+
+
+#: Drive (test_contract's parameter) → the group of its own tests: the contract's short run of the drive's example
+#: and the drive's tests then share one run of it (`example_run`).
+CONTRACT_GROUPS = {
+    "cycloid_pin": "cycloid",
+    "harmonic": "harmonic",
+    "helical_planetary": "helical",
+    "planetary_2kh": "planetary",
+    "rv_khv": "rv",
 }
 
 
@@ -93,6 +109,8 @@ def group_of(nodeid: str) -> tuple[str, bool]:
     stem = Path(path).stem
     if stem == "test_notebooks" and name.startswith("test_notebook_runs["):
         return NOTEBOOK_GROUPS.get(name[len("test_notebook_runs[") : -1], "notebooks"), True
+    if stem == "test_contract" and name.endswith("]"):
+        return CONTRACT_GROUPS.get(name[name.index("[") + 1 : -1], stem), False
     return GROUPS.get(stem, stem), False
 
 
@@ -133,3 +151,50 @@ def pytest_xdist_make_scheduler(config, log):
             return group_of(nodeid)[0]
 
     return GroupScheduling(config, log)
+
+
+#: Samples and seed of the contract's short run of each drive's example (tests/test_contract.py), which the drive's
+#: tests of the same example read too (`example_run`).
+CONTRACT_SAMPLES, CONTRACT_SEED = 40, 2
+
+
+class ExampleRun(NamedTuple):
+    """A shared ``gearte run``: its results folder and what it printed."""
+
+    out: Path
+    stdout: str
+
+
+@pytest.fixture(scope="session")
+def example_run(tmp_path_factory):
+    """``example_run(path, *, samples, seed, drive_only=False)``: the results folder (and printed output) of
+    ``gearte run`` on the study file `path`, run once per worker for each set of arguments and shared by the tests
+    that read it (the contract's short run of a drive's example and the drive's own tests of that example;
+    `CONTRACT_GROUPS` puts them on one worker). With `drive_only` the study kinds (budgets, optimisers,
+    sensitivities) are left out: the drive's own outputs only (`gearte.cli.run.run_study`). Tests read the
+    folder, never write into it."""
+    import contextlib
+    import dataclasses
+    import io
+
+    from gearte import cli
+    from gearte.cli.config import load_study
+    from gearte.cli.run import run_study
+
+    done: dict[tuple, ExampleRun] = {}
+
+    def run(path: Path, *, samples: int, seed: int, drive_only: bool = False) -> ExampleRun:
+        key = (str(path), samples, seed, drive_only)
+        if key not in done:
+            out = tmp_path_factory.mktemp("example_run") / Path(path).stem
+            printed = io.StringIO()
+            with contextlib.redirect_stdout(printed):
+                if drive_only:
+                    run_study(dataclasses.replace(load_study(path, samples=samples, seed=seed), kinds={}), out)
+                else:
+                    args = ["run", str(path), "--out", str(out), "--samples", str(samples), "--seed", str(seed)]
+                    assert cli.main(args) == 0
+            done[key] = ExampleRun(out, printed.getvalue())
+        return done[key]
+
+    return run

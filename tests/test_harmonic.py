@@ -3,8 +3,6 @@ assembly phases, inputs."""
 
 import json
 import math
-import subprocess
-import sys
 import tomllib
 from fractions import Fraction
 from pathlib import Path
@@ -14,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import CONTRACT_SAMPLES, CONTRACT_SEED
 
 import gearte
 from gearte import Components, ConfigError, Eccentricity, ErrorModel, ErrorSource, Rayleigh, UniformPhase, to_signal
@@ -541,15 +540,9 @@ def _estimate_from_toml(path):
 
 
 @pytest.mark.slow
-def test_gearte_run_harmonic_example(tmp_path):
-    out = tmp_path / "harmonic"
-    r = subprocess.run(
-        [sys.executable, "-m", "gearte", "run", str(EXAMPLE), "--out", str(out), "--samples", "300"],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-    )
-    assert r.returncode == 0, r.stderr
+def test_gearte_run_harmonic_example(example_run):
+    # The contract's short run of this example (tests/test_contract.py), shared: one `gearte run` per worker.
+    out = example_run(EXAMPLE, samples=CONTRACT_SAMPLES, seed=CONTRACT_SEED).out
     s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert s["estimate_arcmin"] == pytest.approx(_estimate_from_toml(EXAMPLE), rel=1e-12)
     assert s["beats_per_output_rev"] == 2
@@ -576,7 +569,7 @@ def test_gearte_run_harmonic_example(tmp_path):
     basis = {e["name"]: e["basis"] for e in s["estimate"]["values_and_sources"]}
     assert basis["K_b"].startswith("Liu") and basis["cam_profile"] == "gearte's assumption" and "ISO 1328" in basis["cs_pitch"]
     te = s["te"]
-    assert te["metric"] == "peak_to_peak" and te["n"] == 300 and set(te["percentiles"]) >= {"50", "99.73"}
+    assert te["metric"] == "peak_to_peak" and te["n"] == CONTRACT_SAMPLES and set(te["percentiles"]) >= {"50", "99.73"}
     for f in ("record.png", "spectrum.png", "estimate.png", "histogram.png", "report.md"):
         assert (out / f).is_file()
     report = (out / "report.md").read_text(encoding="utf-8")
