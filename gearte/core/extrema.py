@@ -65,18 +65,21 @@ def _grid_values(signal: TESignal, cos_b: np.ndarray, sin_b: np.ndarray) -> Arra
 def _cis_powers(c1: Array, s1: Array, orders: tuple[int, ...]) -> tuple[Array, Array]:
     """cos(kτ), sin(kτ) for each order k from cos τ, sin τ, by repeated squaring (log k products each).
 
-    Cheaper than a sine and cosine per order on the CPU; the rounding error grows like k·ε.
+    Cheaper than a sine and cosine per order on the CPU; the rounding error grows like k·ε. The squarings
+    cos 2ʲτ, sin 2ʲτ are shared by the orders (each order multiplies those of its binary digits, lowest first).
     """
+    pc, ps = [c1], [s1]
+    for _ in range(max(orders).bit_length() - 1):
+        bc, bs = pc[-1], ps[-1]
+        pc.append(bc * bc - bs * bs)
+        ps.append(2.0 * bc * bs)
     cos_k, sin_k = [], []
     for k in orders:
         rc, rs = None, None
-        bc, bs = c1, s1
-        while k:
-            if k & 1:
+        for j in range(k.bit_length()):
+            if (k >> j) & 1:
+                bc, bs = pc[j], ps[j]
                 rc, rs = (bc, bs) if rc is None or rs is None else (rc * bc - rs * bs, rc * bs + rs * bc)
-            k >>= 1
-            if k:
-                bc, bs = bc * bc - bs * bs, 2.0 * bc * bs
         cos_k.append(rc)
         sin_k.append(rs)
     return jnp.stack(cos_k, axis=-1), jnp.stack(sin_k, axis=-1)
