@@ -92,8 +92,8 @@ COST_S = {
 }
 
 
-#: Drive (test_contract's parameter) → the group of its own tests: the contract's short run of the drive's example
-#: and the drive's tests then share one run of it (`example_run`).
+#: Drive (test_contract's parameter) → the group of its own tests, so that the contract's short run of the drive's
+#: example and the drive's tests that read the same run (harmonic, cycloid) share it (`example_run`).
 CONTRACT_GROUPS = {
     "cycloid_pin": "cycloid",
     "harmonic": "harmonic",

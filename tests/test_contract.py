@@ -160,8 +160,8 @@ def test_a_short_run_writes_every_output(case, tmp_path, monkeypatch, capsys, ex
     else:
         # The drive's own outputs only where the example has study kinds (budgets, optimisers): they have their own
         # tests. The run is shared with the drive's tests that read this example's results (conftest.example_run).
-        full = EXAMPLES[name].name in RUN_IN_FULL
-        out = example_run(cfg, samples=CONTRACT_SAMPLES, seed=CONTRACT_SEED, drive_only=bool(study.kinds) and not full).out
+        drive_only = bool(study.kinds) and name not in RUN_IN_FULL
+        out = example_run(cfg, samples=CONTRACT_SAMPLES, seed=CONTRACT_SEED, drive_only=drive_only).out
     for f in ("summary.json", "report.md", "samples.npz", "histogram.png", "trace.png"):
         assert (out / f).exists(), f
     s = json.loads((out / "summary.json").read_text())
