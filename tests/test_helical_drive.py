@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from gearte import cli
@@ -120,6 +120,7 @@ def test_errors_te_with_constant_mesh_stiffness_is_the_kinematic_load_sharing_mo
 
 @settings(max_examples=12, deadline=None)
 @given(scale=st.floats(0.05, 20.0), turn=st.floats(0.0, 2 * math.pi), seed=st.integers(0, 2**16))
+@example(scale=0.5, turn=0.0, seed=5771)  # errors that nearly cancel: their TE is 1/100 of the usual (5e-7 rad)
 def test_errors_te_is_linear_in_the_eccentricity_vectors(stage, respond, scale, turn, seed):
     """Scaling every magnitude scales the errors' TE; two sets of errors add as vectors (magnitude, phase)."""
     d = _short(stage)
@@ -132,14 +133,17 @@ def test_errors_te_is_linear_in_the_eccentricity_vectors(stage, respond, scale, 
     ta, tb = err_te(a), err_te(b)
     scaled = {n: Eccentricity(scale * e.magnitude, e.phase) for n, e in a.items()}
     size = np.max(np.abs(ta))  # the rounding of the solves scales with the values, not with their spread
-    np.testing.assert_allclose(err_te(scaled), scale * ta, rtol=0, atol=1e-12 * scale * size)
+    # The errors' TE is a difference of two TEs of about 7.6e-3 rad (the load's deflection): it cannot be known
+    # better than its last bits, 8 ε × 7.6e-3 rad (ε × 7.6e-3 rad = 1.7e-18 rad), whatever the errors' size.
+    floor = 8 * np.finfo(np.float64).eps * float(np.max(np.abs(respond(d, a).te_nominal)))
+    np.testing.assert_allclose(err_te(scaled), scale * ta, rtol=0, atol=1e-12 * scale * size + floor)
     both = {}
     for n in a:
         z = np.asarray(a[n].magnitude) * np.exp(1j * np.asarray(a[n].phase))
         z = z + np.asarray(b[n].magnitude) * np.exp(1j * (np.asarray(b[n].phase) + turn))
         both[n] = Eccentricity(np.abs(z), np.angle(z))
     turned = {n: Eccentricity(e.magnitude, e.phase + turn) for n, e in b.items()}
-    np.testing.assert_allclose(err_te(both), ta + err_te(turned), rtol=0, atol=1e-11 * (size + np.max(np.abs(tb))))
+    np.testing.assert_allclose(err_te(both), ta + err_te(turned), rtol=0, atol=1e-11 * (size + np.max(np.abs(tb))) + floor)
 
 
 def test_dynamic_analysis_with_constant_stiffness_is_the_quasi_static_one(stage, respond):
