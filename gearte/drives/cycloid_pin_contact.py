@@ -51,6 +51,7 @@ class PinLayout(eqx.Module):
     pin_circle: Float[Array, ""]  # R′, mm
 
 
+@eqx.filter_jit
 def _pins(drive: CycloidPin, err: CycloidErrors, theta_T) -> PinLayout:
     zb, za = drive.z_pins, drive.z_lobes
     j = jnp.arange(zb, dtype=float)
@@ -107,6 +108,10 @@ def _stop(tree):
     return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x, tree)
 
 
+# The pin layout and the contact solve are jitted: a program that analyses several angles or both load
+# directions (a sweep and the analysis angle, the RV reducer's discs) traces each of them once and calls it, where
+# plain functions would be traced again at every call; the values are those of the inlined code.
+@eqx.filter_jit
 def _contacts(drive: CycloidPin, err: CycloidErrors, pins: PinLayout, theta_T) -> Contact:
     """Rotation to contact of every pin against its own flank (`gearte.drives.cycloid_pin_solve`)."""
     return contacts(drive, err, pins, theta_T)

@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
@@ -65,6 +66,14 @@ def pin_contacts(stage: CycloidPin, errors: CycloidErrors, theta_T) -> tuple[Arr
     mm; > 0 on driving flanks), e (z_p, equivalent errors −l Δθ, or minus the normal clearance for a pin on a short
     lever, mm), mask (z_p, 1.0 for a pin that can touch)).
     """
+    # One traced program for every disc and every call with the same shapes (a jitted function is traced once
+    # and called, where a plain one is traced again at each call: the contact solve is most of an RV unit's
+    # program). θ_T as an array: a float would be a static value, one program per angle.
+    return _pin_contacts(stage, errors, jnp.asarray(theta_T, dtype=float))
+
+
+@eqx.filter_jit
+def _pin_contacts(stage: CycloidPin, errors: CycloidErrors, theta_T) -> tuple[Array, Array, Array, Array]:
     cl = clearances(stage, errors, theta_T, normal=False)
     lay = pin_layout(stage, errors, theta_T)
     c = lay.centre
