@@ -121,6 +121,11 @@ class MeshedSystem(eqx.Module):
     def vector_field(self, tau, y, args=None):
         """diffrax vector field of the state y = (q, q')."""
         del args
+        # Jitted: a solve calls it at every stage of the Runge–Kutta step it unrolls, and jitted it is traced (and
+        # differentiated) once per solve instead of at each call.
+        return _vector_field(self, tau, y)
+
+    def _field(self, tau, y):
         q, v = jnp.split(y, 2)
         f = jnp.sum(self.pair_forces(tau, q, v), axis=-1)
         acc = (self.load - self.stiffness @ q - self.damping @ v - self.projection.T @ f) / self.mass
@@ -148,6 +153,11 @@ class MeshedSystem(eqx.Module):
         for _ in range(newton_steps):
             q = q - linalg.solve_spd(jax.jacfwd(residual)(q), residual(q)[:, None])[:, 0]
         return q
+
+
+@eqx.filter_jit
+def _vector_field(system: MeshedSystem, tau, y):
+    return system._field(tau, y)
 
 
 class LOAErrors(eqx.Module):
