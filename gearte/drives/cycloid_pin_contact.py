@@ -202,7 +202,11 @@ class Clearances(eqx.Module):
 
 
 def _analyse(drive: CycloidPin, err: CycloidErrors, theta_T, normal: bool) -> Clearances:
-    theta_T = jnp.asarray(theta_T, dtype=float)
+    return _analyse_jit(drive, err, jnp.asarray(theta_T, dtype=float), normal)
+
+
+@eqx.filter_jit
+def _analyse_jit(drive: CycloidPin, err: CycloidErrors, theta_T, normal: bool) -> Clearances:
     pins = _pins(drive, err, theta_T)
     con = _contacts(drive, err, pins, theta_T)
     drive_side = pins.side > 0
