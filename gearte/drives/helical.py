@@ -130,6 +130,11 @@ class HelicalPlanetary(eqx.Module):
         self, modifications: StageModifications | None = None, errors: Mapping[str, Eccentricity] | None = None
     ) -> DynamicResponse:
         """The periodic steady state (`DynamicResponse`). Jit it with `eqx.filter_jit`."""
+        # A jitted function: the objectives, gradients and checks of a study that call it several times with arrays
+        # of the same shapes trace the solve once.
+        return _response_jit(self, modifications, errors)
+
+    def _response(self, modifications: StageModifications | None, errors: Mapping[str, Eccentricity] | None) -> DynamicResponse:
         sys = self.system(modifications, errors)
         sol = solve_periodic(sys.system, self.solver)
         dte = (sol.q @ sys.mid_projection.T).T
@@ -167,6 +172,11 @@ class HelicalPlanetary(eqx.Module):
         if smooth is None:
             return peak_to_peak(dte)
         return smooth_peak_to_peak(dte, smooth)
+
+
+@eqx.filter_jit
+def _response_jit(drive: HelicalPlanetary, modifications, errors) -> DynamicResponse:
+    return drive._response(modifications, errors)
 
 
 # ---------------------------------------------------------------- parameter files
