@@ -96,6 +96,10 @@ class IdentificationProblem(eqx.Module):
         return [signal_coefficients(self.drive, self.errors_from(p_full, dict(t))) for t in self.turns]
 
     def _residual(self, y: Array, z: Sequence[Array]) -> Array:
+        # Jitted: the solve, the residual at its solution and its Jacobian trace it once.
+        return _residual_jit(self, y, list(z))
+
+    def _residual_body(self, y: Array, z: Sequence[Array]) -> Array:
         # |B c − te|² = |R c − Qᵀte|² + |te − Q Qᵀte|² with B = QR the record's basis [1, cos kθ, sin kθ]:
         # the model's residual on the record, less a constant; in µrad.
         k = len(y) - len(self.r_factors)
@@ -262,6 +266,11 @@ def _basis(theta: np.ndarray, orders, f0: float) -> np.ndarray:
     """Columns [1, cos(k f₀ θ)…, sin(k f₀ θ)…] on a record's input angles: the model is B · coefficients."""
     arg = np.outer(theta * f0, np.asarray(orders, dtype=np.float64))
     return np.concatenate([np.ones((len(theta), 1)), np.cos(arg), np.sin(arg)], axis=1)
+
+
+@eqx.filter_jit
+def _residual_jit(problem: IdentificationProblem, y: Array, z: list[Array]) -> Array:
+    return problem._residual_body(y, z)
 
 
 def identification_problem(
