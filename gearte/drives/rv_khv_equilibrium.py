@@ -251,8 +251,9 @@ def _newton(s: ContactSystem, q0):
 
 #: `_newton`, one solve after another under `vmap` (`jax.custom_batching.sequential_vmap`): a batched while loop
 #: would run every solve of a batch for as many iterations as its slowest one. Its inputs carry no derivative (the
-#: implicit-function step in `solve` differentiates), so it needs no derivative rule of its own.
-_newton_each = jax.custom_batching.sequential_vmap(_newton)
+#: implicit-function step in `solve` differentiates), so it needs no derivative rule of its own. Jitted: the batching
+#: rule and the shape evaluation call it again, and a jitted function is traced once.
+_newton_each = jax.custom_batching.sequential_vmap(eqx.filter_jit(_newton))
 
 
 def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium:
