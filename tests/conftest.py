@@ -73,22 +73,22 @@ NOTEBOOK_GROUPS = {
 }
 #: Cost of each group (s, one worker, warm compilation cache; measured, rounded): only their order matters.
 COST_S = {
-    "cycloid": 155,
-    "rv": 150,
-    "helical": 120,
-    "planetary_optimise": 110,
-    "planetary": 80,
-    "harmonic": 80,
-    "identification": 75,
-    "test_fuzz_study_files": 43,
-    "test_programs": 36,
-    "test_metrics": 25,
-    "test_contract": 23,
-    "test_cli": 22,
-    "test_interrupt": 19,
-    "doe": 18,
-    "test_costs": 10,
-    "test_bad_input": 9,
+    "rv": 110,
+    "cycloid": 92,
+    "planetary_optimise": 86,
+    "helical": 73,
+    "planetary": 59,
+    "identification": 55,
+    "harmonic": 55,
+    "test_fuzz_study_files": 33,
+    "test_programs": 18,
+    "test_metrics": 17,
+    "test_cli": 16,
+    "test_contract": 14,
+    "test_interrupt": 13,
+    "doe": 11,
+    "test_costs": 8,
+    "test_bad_input": 6,
 }
 
 
