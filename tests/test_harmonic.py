@@ -570,6 +570,11 @@ def test_gearte_run_harmonic_example(example_run):
     assert basis["K_b"].startswith("Liu") and basis["cam_profile"] == "gearte's assumption" and "ISO 1328" in basis["cs_pitch"]
     te = s["te"]
     assert te["metric"] == "peak_to_peak" and te["n"] == CONTRACT_SAMPLES and set(te["percentiles"]) >= {"50", "99.73"}
+    # The run's samples are the library's Monte Carlo of the same study, bit for bit: the run takes the metric per
+    # sample (beside the drive's per-sample outputs), `gearte.TEStudy` on the whole batch.
+    study = load_study(EXAMPLE)
+    mc = gearte.monte_carlo(gearte.TEStudy(study.drive, study.errors, metric=study.metric), key=CONTRACT_SEED, n_samples=CONTRACT_SAMPLES)
+    np.testing.assert_array_equal(np.load(out / "samples.npz")["te_rad"], mc.values)
     for f in ("record.png", "spectrum.png", "estimate.png", "histogram.png", "report.md"):
         assert (out / f).is_file()
     report = (out / "report.md").read_text(encoding="utf-8")
