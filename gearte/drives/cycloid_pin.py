@@ -104,6 +104,7 @@ Units: geometry in mm, errors in µm, angles in rad inside; reports in ″ and �
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from collections.abc import Mapping
@@ -262,6 +263,18 @@ class CycloidAnalysis(eqx.Module):
         self.sweep_points_per_pitch = as_int("sweep_points_per_pitch", sweep_points_per_pitch, minimum=1)
         self.sweep_revolutions = as_int("sweep_revolutions", sweep_revolutions, minimum=1)
         self.normal = bool(normal)
+
+
+@functools.lru_cache(maxsize=64)
+def _error_sources(process: str, z_pins: int) -> dict[str, SourceSpec]:
+    """`CycloidPin.error_sources` of a disc of this process and pin count, built once (a study asks for them many
+    times; callers get a copy of the dict, and `SourceSpec` is immutable)."""
+    out = {}
+    for name in PROCESSES[process]:
+        shape = (z_pins - 1,) if name in PER_SPACE else (z_pins,) if name in PER_PIN else ()
+        symbol, text = GENERATING_SOURCE_TEXT[name] if process == "generating" and name in GENERATING_SOURCE_TEXT else SOURCE_TEXT[name]
+        out[name] = SourceSpec(name, "deviation", shape=shape, unit=ERROR_UNITS[name], symbol=symbol, description=text)
+    return out
 
 
 class CycloidPin(AbstractGridDrive):
@@ -440,14 +453,7 @@ class CycloidPin(AbstractGridDrive):
     def error_sources(self) -> dict[str, SourceSpec]:
         """The fields of `CycloidErrors` of the disc's process, each a signed deviation: for form grinding the 20 of
         `ERROR_FIELDS`, for generating grinding the 26 of `GENERATING_ERROR_FIELDS`, in that order."""
-        out = {}
-        for name in self.error_fields:
-            shape = (self.z_lobes,) if name in PER_SPACE else (self.z_pins,) if name in PER_PIN else ()
-            symbol, text = (
-                GENERATING_SOURCE_TEXT[name] if self.process == "generating" and name in GENERATING_SOURCE_TEXT else SOURCE_TEXT[name]
-            )
-            out[name] = SourceSpec(name, "deviation", shape=shape, unit=ERROR_UNITS[name], symbol=symbol, description=text)
-        return out
+        return dict(_error_sources(self.process, self.z_pins))
 
     def input_angles(self) -> Float[Array, " p"]:
         """The grid the metrics are taken on: `analysis.revolutions` input revolutions, `analysis.positions_per_pitch`

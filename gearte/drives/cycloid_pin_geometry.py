@@ -11,11 +11,13 @@ Units: geometry in mm, errors in µm, angles in rad.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -47,7 +49,13 @@ def min_curvature_radius(pin_circle_radius: float, eccentricity: float, z_pins: 
 
     - `pin_circle_radius`: R (mm); `eccentricity`: a (mm); `z_pins`: z_b.
     """
-    R, a, zb = float(pin_circle_radius), float(eccentricity), int(z_pins)
+    return _min_curvature_radius(float(pin_circle_radius), float(eccentricity), int(z_pins), int(points))
+
+
+@functools.lru_cache(maxsize=256)
+def _min_curvature_radius(R: float, a: float, zb: int, points: int) -> float:
+    """`min_curvature_radius` on plain numbers, remembered: every drive built with the same geometry (a study's checks,
+    its Monte Carlo, a tolerance study's many drives) asks for the same value, a 20,001-point evaluation."""
     za = zb - 1
     K = a * zb / R
     phi = np.linspace(0.0, math.pi, points)
@@ -264,27 +272,35 @@ ANGLE_FIELDS = ("index_offset", "indexing", "generating_chain", "pitch_accumulat
 ERROR_UNITS = {name: ("rad" if name in ANGLE_FIELDS or name.endswith("_phase") else "µm") for name in ALL_ERROR_FIELDS}
 
 
+def _given_errors(errors: CycloidErrors | Mapping[str, Any] | None) -> dict[str, Any]:
+    """The error fields that `errors` gives, by name (None gives none); an unknown field name is refused."""
+    if errors is None:
+        return {}
+    if isinstance(errors, CycloidErrors):
+        return {name: getattr(errors, name) for name in ALL_ERROR_FIELDS}
+    if isinstance(errors, Mapping):
+        unknown = sorted(set(errors) - set(ALL_ERROR_FIELDS))
+        if unknown:
+            raise ValueError(f"errors: unknown error field(s) {unknown}; the fields are {list(ALL_ERROR_FIELDS)}")
+        return dict(errors)
+    raise ValueError(f"errors: expected a CycloidErrors or a mapping of error fields, got {type(errors).__name__}")
+
+
 def as_cycloid_errors(errors: CycloidErrors | Mapping[str, Any] | None) -> CycloidErrors:
     """`errors` as a `CycloidErrors`: None is no error; a mapping names fields (µm or rad), the others are 0.
 
     A mapping is what the drive protocol passes (``CycloidPin.response``): source name → value.
     """
-    if errors is None:
-        return CycloidErrors()
     if isinstance(errors, CycloidErrors):
         return errors
-    if isinstance(errors, Mapping):
-        unknown = sorted(set(errors) - set(ALL_ERROR_FIELDS))
-        if unknown:
-            raise ValueError(f"errors: unknown error field(s) {unknown}; the fields are {list(ALL_ERROR_FIELDS)}")
-        return CycloidErrors(**dict(errors))
-    raise ValueError(f"errors: expected a CycloidErrors or a mapping of error fields, got {type(errors).__name__}")
+    return CycloidErrors(**_given_errors(errors))
 
 
 def checked_errors(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] | None) -> CycloidErrors:
     """`errors` with per-space and per-pin fields broadcast to z_a and z_b values; shapes checked (trace time).
 
     `errors`: a `CycloidErrors`, a mapping of field names to values (the others 0), or None (no error).
+    Values that are not JAX arrays are checked and broadcast in NumPy: one conversion each, in `CycloidErrors`.
     """
     if isinstance(errors, Mapping) and getattr(drive, "process", "form") == "form":
         wrong = sorted(set(errors) & set(GENERATING_ONLY))
@@ -293,18 +309,20 @@ def checked_errors(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] 
                 f"errors: {wrong} are errors of a generating-ground disc; this disc is form-ground "
                 '(give the drive process = "generating", or leave them out)'
             )
-    errors = as_cycloid_errors(errors)
+    given = _given_errors(errors)
     out = {}
     for name in ALL_ERROR_FIELDS:
-        v = jnp.asarray(getattr(errors, name))
+        v = given.get(name, 0.0)
+        shape = np.shape(v)
         if name in PER_SPACE or name in PER_PIN:
             n = drive.z_lobes if name in PER_SPACE else drive.z_pins
             what = "tooth space (z_a)" if name in PER_SPACE else "pin (z_b)"
-            if v.shape not in ((), (1,), (n,)):
-                raise ValueError(f"errors.{name}: give a scalar or one value per {what} = {n} values, got shape {v.shape}")
-            v = jnp.broadcast_to(v.reshape(-1) if v.ndim else v, (n,))
-        elif v.shape != ():
-            raise ValueError(f"errors.{name}: must be a scalar, got shape {v.shape}")
+            if shape not in ((), (1,), (n,)):
+                raise ValueError(f"errors.{name}: give a scalar or one value per {what} = {n} values, got shape {shape}")
+            xp = jnp if isinstance(v, jax.Array) else np
+            v = xp.broadcast_to(xp.reshape(v, -1) if shape else v, (n,))
+        elif shape != ():
+            raise ValueError(f"errors.{name}: must be a scalar, got shape {shape}")
         out[name] = v
     return CycloidErrors(**out)
 

@@ -27,6 +27,7 @@ softplus law's within 2.3e-4 µm, a tenth of the integration error).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
 
 import equinox as eqx
@@ -203,6 +204,12 @@ class LOAErrors(eqx.Module):
 
 def error_sources(n_planets: int) -> dict[str, SourceSpec]:
     """The eccentricity sources of the stage (those of `Planetary2KH`), by name."""
+    return dict(_error_sources(int(n_planets)))
+
+
+@functools.lru_cache(maxsize=16)
+def _error_sources(n_planets: int) -> dict[str, SourceSpec]:
+    """`error_sources`, built once per planet count (callers get a copy of the dict; `SourceSpec` is immutable)."""
     return {
         name: SourceSpec(name, "eccentricity", shape=(n_planets if per_planet else 1,), symbol=sym, description=name.replace("_", " "))
         for name, (sym, per_planet) in SOURCES.items()

@@ -40,6 +40,7 @@ Units: geometry in mm, errors in µm (rad for angles), angles in rad inside; rep
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -311,24 +312,9 @@ class RVKHV(AbstractGridDrive):
 
     # ------------------------------------------------------------ the drive protocol
 
-    def _shape(self, key: str) -> tuple[int, ...]:
-        zc = self.z_pins - 1
-        return {
-            "": (),
-            "1": (1,),
-            "N": (self.cranks,),
-            "D": (self.discs,),
-            "zp": (self.z_pins,),
-            "Dzc": (self.discs * zc,),
-            "DN": (self.discs * self.cranks,),
-        }[key]
-
     @property
     def error_sources(self) -> dict[str, SourceSpec]:
-        return {
-            name: SourceSpec(name, kind, shape=self._shape(shape), unit=unit, symbol=symbol, description=text)  # pyright: ignore[reportArgumentType]
-            for name, (kind, shape, unit, symbol, text) in SOURCES.items()
-        }
+        return dict(_error_sources(self.cranks, self.discs, self.z_pins))
 
     def output_angles(self, points: int | None = None) -> Float[Array, " p"]:
         """Output angles θ_o of the grid over one output revolution (rad)."""
@@ -418,6 +404,18 @@ class RVKHV(AbstractGridDrive):
         from .rv_khv_outputs import study_outputs
 
         return study_outputs(self, context)
+
+
+@functools.lru_cache(maxsize=64)
+def _error_sources(cranks: int, discs: int, z_pins: int) -> dict[str, SourceSpec]:
+    """`RVKHV.error_sources` of a reducer with these counts, built once (a study asks for them many times; callers get
+    a copy of the dict, and `SourceSpec` is immutable)."""
+    zc = z_pins - 1
+    shapes = {"": (), "1": (1,), "N": (cranks,), "D": (discs,), "zp": (z_pins,), "Dzc": (discs * zc,), "DN": (discs * cranks,)}
+    return {
+        name: SourceSpec(name, kind, shape=shapes[shape], unit=unit, symbol=symbol, description=text)  # pyright: ignore[reportArgumentType]
+        for name, (kind, shape, unit, symbol, text) in SOURCES.items()
+    }
 
 
 @eqx.filter_jit
