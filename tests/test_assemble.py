@@ -5,6 +5,7 @@ import itertools
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import gearte
 from gearte.identification import assemble_batch
@@ -61,3 +62,9 @@ def test_selective_assembly_beats_random_assembly():
     # every part used once
     for s in SOURCES:
         assert sorted(out.assignment[s].ravel()) == list(range(12))
+
+
+def test_random_batches_below_one_is_refused_before_any_work():
+    for bad in (0, -5, 2.5, True):
+        with pytest.raises(ValueError, match="random_batches: the comparison needs at least one random assembly"):
+            assemble_batch(DRIVE, parts(3, seed=7), random_batches=bad)

@@ -187,6 +187,83 @@ def test_study_file_mistakes_named_by_check_and_run(old, new, message, capsys, t
         load_study(cfg)
 
 
+@pytest.mark.parametrize(
+    "example, old, message",
+    [
+        ("planetary_wang2013_budget.toml", "samples = 4096 ", "[budget] samples: must be ≤ 4294967295"),
+        ("planetary_wang2013_budget.toml", "check_samples = 50000 ", "[budget] check_samples: must be ≤ 4294967295"),
+        ("planetary_wang2013_allocate.toml", "starts = 16 ", "[allocation] starts: must be ≤ 4294967295"),
+        ("planetary_wang2013_allocate.toml", "check_samples = 50000 ", "[allocation] check_samples: must be ≤ 4294967295"),
+        ("cycloid_yao2001_modified.toml", "pathwise_samples = 64", "[sensitivity] pathwise_samples: must be ≤ 4294967295"),
+    ],
+)
+def test_a_study_kinds_sample_counts_beyond_one_key_named_by_check_and_run(example, old, message, capsys, tmp_path, monkeypatch):
+    """Sample counts of the study kinds have the bound of the study's own (sample indices are 32-bit): `check` names
+    them, and `run` refuses before computing (2⁴⁰ samples would otherwise run out of memory)."""
+    text = (ROOT / "examples" / example).read_text()
+    assert old in text
+    cfg = tmp_path / "s.toml"
+    key = old.split("=")[0].strip()
+    cfg.write_text(text.replace(old, f"{key} = {2**40} "))
+    refused(capsys, tmp_path, "check", cfg, message=message)
+    refused(capsys, tmp_path, "run", cfg, "--out", tmp_path / "o", message=message, monkeypatch=monkeypatch)
+
+
+def test_out_of_memory_is_reported_plainly(capsys, tmp_path, monkeypatch):
+    class JaxRuntimeError(RuntimeError):  # the name XLA's errors carry
+        pass
+
+    def exhausted(*a, **k):
+        raise JaxRuntimeError("RESOURCE_EXHAUSTED: Out of memory allocating 26388279066624 bytes.")
+
+    monkeypatch.setattr(run_mod, "_run", exhausted)
+    err = refused(capsys, tmp_path, "run", RANDOM, "--out", tmp_path / "o", message="out of memory", computing=True)
+    assert "reduce its sample counts" in err
+
+
+def test_several_processes_check_the_study_file_and_the_folder_before_joining(capsys, tmp_path, monkeypatch):
+    """Joining a several-process run waits for the other processes: a missing study file or a bad results folder is
+    named before it, not after a time-out."""
+
+    def no_join(*a, **k):
+        raise AssertionError("joined the processes before checking the inputs")
+
+    monkeypatch.setattr(main_mod, "_distributed", no_join)
+    several = ["--processes", "2", "--process-id", "0", "--coordinator", "127.0.0.1:1"]
+    missing = tmp_path / "missing.toml"
+    refused(capsys, tmp_path, "run", missing, "--out", tmp_path / "o", *several, message=str(missing))
+    f = tmp_path / "f"
+    f.write_text("x")
+    refused(capsys, tmp_path, "run", RANDOM, "--out", f, *several, message="is an existing file")
+
+
+def test_out_a_mount_point(capsys, tmp_path, monkeypatch):
+    target = tmp_path / "volume"
+    target.mkdir()
+    real = os.path.ismount
+    monkeypatch.setattr(os.path, "ismount", lambda p: Path(p) == target or real(p))
+    refused(capsys, tmp_path, "run", RANDOM, "--out", target, message="is a mount point", monkeypatch=monkeypatch)
+
+
+def test_a_result_that_cannot_be_replaced_is_kept_and_nothing_is_left(capsys, tmp_path, finished, monkeypatch):
+    """Replacing an earlier result renames it aside first; where that fails (a busy folder) the run is refused, naming
+    the folder, and the earlier result stays as it was with no folder of gearte's beside it."""
+    import errno
+
+    from gearte.cli import io as io_mod
+
+    res = copy_run(finished[0], tmp_path / "res")
+    real = os.rename
+
+    def busy(src, dst):
+        if Path(src) == res:
+            raise OSError(errno.EBUSY, os.strerror(errno.EBUSY), str(src))
+        return real(src, dst)
+
+    monkeypatch.setattr(io_mod.os, "rename", busy)
+    refused(capsys, tmp_path, "run", RANDOM, "--out", res, "--samples", "16", message=f"--out {res}: cannot be replaced", computing=True)
+
+
 def test_option_beyond_one_key_named_as_the_option(capsys, tmp_path, monkeypatch):
     for command in (["check", RANDOM], ["run", RANDOM, "--out", tmp_path / "o"]):
         refused(capsys, tmp_path, *command, "--samples", 2**32, message="--samples: must be in [1, 2³² − 1]", monkeypatch=monkeypatch)

@@ -179,8 +179,8 @@ class Budget(AbstractStudyKind):
             raise ConfigError("[budget] pareto_specs: expected a list of positive numbers (specs of the first constraint)")
         return BudgetSpec(
             constraints=tuple(constraints),
-            samples=t.integer("samples", 4096, minimum=64),
-            check_samples=t.integer("check_samples", 50_000, minimum=1000),
+            samples=t.integer("samples", 4096, minimum=64, maximum=2**32 - 1),
+            check_samples=t.integer("check_samples", 50_000, minimum=1000, maximum=2**32 - 1),
             costs=costs,
             nominal=nominal,
             maximum={n: factor * nominal[n] for n in names},

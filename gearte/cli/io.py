@@ -166,7 +166,7 @@ def _inside(a: Path, b: Path) -> bool:
 def check_output(out: str | Path, *, inputs: Iterable[str | Path] = (), option: str = "--out") -> Path:
     """Check a results folder before anything is computed; returns it resolved, or raises `OutputError`.
 
-    Refused: an existing file or a link; a path below a file; the current folder or one holding it;
+    Refused: an existing file or a link; a mount point; a path below a file; the current folder or one holding it;
     a folder that is, holds or lies inside one of `inputs`; a non-empty folder gearte did not write;
     a place where no folder can be created.
     """
@@ -182,6 +182,11 @@ def check_output(out: str | Path, *, inputs: Iterable[str | Path] = (), option: 
         raise OutputError(f"{option} {given}: cannot be resolved ({e})") from None
     if resolved.exists() and not resolved.is_dir():
         raise OutputError(f"{option} {given}: is an existing file, not a folder; choose another {option}")
+    if resolved.is_dir() and os.path.ismount(resolved):
+        raise OutputError(
+            f"{option} {given}: is a mount point, which cannot be replaced (gearte writes a new results folder beside "
+            f"the old one and renames it): name a sub-folder, e.g. {option} {Path(given) / 'results'}"
+        )
     for parent in resolved.parents:
         if parent.exists():
             if not parent.is_dir():
@@ -246,7 +251,11 @@ def atomic_output_dir(path: str | Path, *, inputs: Iterable[str | Path] = (), op
             old = None
             if path.exists():
                 old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-", dir=path.parent))
-                os.rename(path, old / "previous")
+                try:
+                    os.rename(path, old / "previous")
+                except OSError as e:
+                    old.rmdir()
+                    raise OutputError(f"{option} {path}: cannot be replaced ({e.strerror}); choose another {option}") from None
             try:
                 os.rename(tmp, path)
             except OSError:

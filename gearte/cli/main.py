@@ -216,7 +216,7 @@ def _identify_parsers(sub) -> None:
     a.add_argument("--study", required=True, help="study file (TOML) of the drive")
     a.add_argument("--out", required=True, help="results folder (new, empty, or an earlier gearte result)")
     a.add_argument("--seed", type=int, default=0, help="seed of the random start and of the random assemblies")
-    a.add_argument("--random-batches", type=int, default=100, help="random assemblies of the same parts for the comparison")
+    a.add_argument("--random-batches", type=_positive_int, default=100, help="random assemblies of the same parts for the comparison (≥ 1)")
 
 
 def _interrupted(done: bool) -> int:
@@ -249,14 +249,28 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return _interrupted(done)
-    except Exception:
+    except Exception as e:
         # An interrupt raised inside a compiled extension (e.g. while a module is imported) can come out as
         # another exception; the signal was remembered, so it is reported as what it is.
         if interrupt_received() is not None:
             return _interrupted(done)
+        if _out_of_memory(e):
+            print(
+                "gearte: error: out of memory: the study holds more than this machine has; reduce its sample counts "
+                "(--samples, [study] samples, or the samples of its [budget], [allocation], [sensitivity] or [doe] table)",
+                file=sys.stderr,
+            )
+            return 2
         raise
     finally:
         reset_interrupts()
+
+
+def _out_of_memory(e: BaseException) -> bool:
+    """Whether `e` is Python's or XLA's out-of-memory error (XLA's comes as a runtime error, RESOURCE_EXHAUSTED)."""
+    if isinstance(e, MemoryError):
+        return True
+    return type(e).__name__ in ("JaxRuntimeError", "XlaRuntimeError") and "RESOURCE_EXHAUSTED" in str(e)
 
 
 def _distributed(args) -> None:
@@ -322,9 +336,13 @@ def _setup_jax(args) -> None:
 
 def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
-    if args.command == "check":
-        # The file's own checks first, without JAX: a broken file is named at once.
+    several = args.command == "run" and (getattr(args, "cluster", False) or getattr(args, "processes", None) is not None)
+    if args.command == "check" or several:
+        # The file's own checks first, without JAX: a broken file is named at once (and, in a several-process run,
+        # before joining the other processes, which would wait for this one).
         _lazy("check_file")(args.config, samples=args.samples, seed=args.seed)
+    if several:
+        check_output(args.out, inputs=[args.config])
     _setup_jax(args)
     if args.command == "grade":
         tol = _lazy("iso1328_tolerances")(

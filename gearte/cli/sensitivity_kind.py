@@ -29,7 +29,7 @@ class Sensitivity(AbstractStudyKind):
     table = "sensitivity"
 
     def read(self, t: Table, study: Study) -> SensitivitySpec:
-        n = t.integer("pathwise_samples", 64, minimum=1)
+        n = t.integer("pathwise_samples", 64, minimum=1, maximum=2**32 - 1)
         offered = study.drive.metrics
         names = t.get("pathwise_metrics", [study.metric.name])
         if not isinstance(names, list) or not names or not all(isinstance(x, str) for x in names):

@@ -129,6 +129,8 @@ def assemble_batch(
     - `random_batches`: random assemblies of the same parts for the comparison.
     """
     specs = drive.error_sources
+    if isinstance(random_batches, bool) or not isinstance(random_batches, int) or random_batches < 1:
+        raise ValueError(f"random_batches: the comparison needs at least one random assembly (a whole number ≥ 1), got {random_batches!r}")
     if not parts:
         raise ValueError("parts: give at least one part type (source name → Eccentricity of the measured parts)")
     counts, n_drives = {}, None
