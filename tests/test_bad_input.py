@@ -163,6 +163,18 @@ def test_binary_study_file_named(capsys, tmp_path):
         load_study(cfg)
 
 
+def test_a_pipe_a_device_or_a_huge_file_as_the_study_file(capsys, tmp_path, monkeypatch):
+    """Only a regular file is read: a pipe would block `check` for ever, /dev/zero would never end."""
+    fifo = tmp_path / "s.toml"
+    os.mkfifo(fifo)
+    refused(capsys, tmp_path, "check", fifo, message=f"{fifo}: not a regular file")
+    refused(capsys, tmp_path, "check", "/dev/zero", message="/dev/zero: not a regular file")
+    big = tmp_path / "big.toml"
+    with big.open("wb") as f:
+        f.truncate(17 * 2**20)  # sparse: 17 MiB of nothing
+    refused(capsys, tmp_path, "run", big, "--out", tmp_path / "o", message="at most 16 MiB", monkeypatch=monkeypatch)
+
+
 @pytest.mark.parametrize(
     "old, new, message",
     [

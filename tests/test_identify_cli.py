@@ -34,3 +34,16 @@ def test_bad_record_and_parts_are_refused(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "not an error source" in err and "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv", "parts.csv"]
+
+
+def test_an_unknown_adjust_source_is_refused_before_the_fit(tmp_path, capsys, monkeypatch):
+    from gearte.cli import identify_cmd
+
+    def no_fit(*a, **k):
+        raise AssertionError("fitted before checking --adjust")
+
+    monkeypatch.setattr(identify_cmd, "_solve", no_fit)
+    assert cli.main(["identify", str(STUDY), str(RECORD), "--out", str(tmp_path / "o"), "--adjust", "nosuchsource"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gearte: error: --adjust: 'nosuchsource': not an error source") and "Traceback" not in err
+    assert not any(tmp_path.iterdir())

@@ -104,6 +104,15 @@ def test_statistics_against_numpy():
         gearte.statistics([1.0, float("nan")])
 
 
+def test_statistics_of_values_whose_squares_overflow_stay_finite():
+    """A drive outside its model's range can give finite values past 1e154 whose squares overflow: the std is then
+    taken on the values scaled by their largest magnitude (the report stays valid JSON, no `Infinity`)."""
+    x = np.array([1.0, 2.0, 3.0, 4.0]) * 1e300
+    s = gearte.statistics(x)
+    assert math.isfinite(s.std)
+    assert s.std == pytest.approx(np.std([1.0, 2.0, 3.0, 4.0], ddof=1) * 1e300, rel=1e-15)
+
+
 class _CountingResponse(gearte.TEStudy):
     traces: list = eqx.field(static=True)
 

@@ -153,6 +153,13 @@ def test_bad_process_options_are_refused(args, match, tmp_path):
     assert r.returncode == 2 and match in r.stderr and "Traceback" not in r.stderr
 
 
+def test_cluster_without_a_scheduler_is_refused(tmp_path):
+    # No scheduler's variables: JAX finds no cluster, and the command says what to do instead.
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("SLURM_", "OMPI_", "PMI_", "MPI_"))}
+    r = _cli("run", PLANETARY, "--samples", "10", "--out", str(tmp_path / "x"), "--cluster", env=env)
+    assert r.returncode == 2 and "--cluster: no cluster scheduler" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
 def test_a_streamed_run_reports_exact_moments_and_bounded_percentiles(single_run, tmp_path, monkeypatch):
     import gearte.cli.run as run_mod
     from gearte.cli.main import main

@@ -24,6 +24,7 @@ import dataclasses
 import difflib
 import math
 import re
+import stat
 import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -78,9 +79,21 @@ class Study:
         return self.tolerances
 
 
+#: Largest study file read (bytes): a study file is a few kB of TOML.
+MAX_STUDY_FILE_BYTES = 16 * 2**20
+
+
 def read_toml(path: Path) -> dict:
-    """The parsed TOML of a study file, or a ConfigError naming the file."""
+    """The parsed TOML of a study file, or a ConfigError naming the file. Only a regular file is read (a pipe or a
+    device could block or never end), and at most `MAX_STUDY_FILE_BYTES` of it."""
     try:
+        info = path.stat()
+        if stat.S_ISDIR(info.st_mode):
+            raise ConfigError(f"{path}: is a folder, not a study file")
+        if not stat.S_ISREG(info.st_mode):
+            raise ConfigError(f"{path}: not a regular file (a pipe, device or socket); give the study file itself")
+        if info.st_size > MAX_STUDY_FILE_BYTES:
+            raise ConfigError(f"{path}: {info.st_size:,} bytes; a study file is TOML text of a few kB (at most 16 MiB)")
         data = path.read_bytes()
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None

@@ -58,6 +58,11 @@ def run_identify(args, command: str) -> int:
     drive = _sinusoidal(study, args.config)
     rec = read_record(args.record, units=_units(args.unit), input_rpm=args.input_rpm, ratio=ratio)
     adjust = {s.strip(): None for s in args.adjust.split(",") if s.strip()}
+    unknown = sorted(set(adjust) - set(drive.error_sources))
+    if unknown:  # before the fit
+        raise ValueError(
+            f"--adjust: {', '.join(map(repr, unknown))}: not an error source of this drive; use some of {sorted(drive.error_sources)}"
+        )
     with atomic_output_dir(args.out, inputs=[args.config, args.record]) as tmp:
         problem = identification_problem(drive, rec)
         assert isinstance(problem, IdentificationProblem)  # a sinusoidal drive's

@@ -294,7 +294,13 @@ def _distributed(args) -> None:
     # CPU devices of different processes talk through gloo (GPUs use their own collectives).
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
     if cluster:
-        jax.distributed.initialize()
+        try:
+            jax.distributed.initialize()
+        except ValueError as e:  # no scheduler's environment to read (JAX: "coordinator_address should be defined")
+            raise ConfigError(
+                f"--cluster: no cluster scheduler's environment found ({e}); run the command under the scheduler "
+                "(e.g. srun under SLURM), or give --processes, --process-id and --coordinator"
+            ) from None
     else:
         jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.processes, process_id=args.process_id)
 

@@ -348,12 +348,17 @@ def statistics(values, *, unit: str = "rad") -> Statistics:
     if not np.all(np.isfinite(v)):
         raise ValueError(f"statistics: {np.count_nonzero(~np.isfinite(v))} non-finite values")
     pct = np.percentile(v, PERCENTILES)
+    with np.errstate(over="ignore", invalid="ignore"):
+        std = float(v.std(ddof=1)) if v.size > 1 else 0.0
+    if not math.isfinite(std):  # squares beyond the float range (values above ~1e154): the same std, scaled
+        scale = float(np.max(np.abs(v)))
+        std = scale * float((v / scale).std(ddof=1))
     return Statistics(
         n=int(v.size),
         min=float(v.min()),
         max=float(v.max()),
         mean=float(v.mean()),
-        std=float(v.std(ddof=1)) if v.size > 1 else 0.0,
+        std=std,
         percentiles={_pct_key(p): float(x) for p, x in zip(PERCENTILES, pct)},
         unit=unit,
     )
