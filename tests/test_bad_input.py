@@ -321,6 +321,16 @@ def test_compare_out_one_of_the_inputs(capsys, tmp_path, finished, monkeypatch):
         compare_runs([a, b], b)
 
 
+def test_compare_out_another_run_is_refused_but_a_comparison_is_replaced(capsys, tmp_path, finished):
+    a = copy_run(finished[0], tmp_path / "a")
+    b = copy_run(finished[1], tmp_path / "b")
+    other = copy_run(finished[0], tmp_path / "other")
+    refused(capsys, tmp_path, "compare", a, b, "--out", other, message=f"--out {other}: holds a gearte run")
+    assert cli.main(["compare", str(a), str(b), "--out", str(tmp_path / "cmp")]) == 0
+    assert cli.main(["compare", str(b), str(a), "--out", str(tmp_path / "cmp")]) == 0  # its own comparison: replaced
+    assert (tmp_path / "cmp" / "comparison.json").is_file()
+
+
 def _broken_runs(tmp_path: Path, a: Path) -> dict[str, tuple[Path, str]]:
     runs = {}
     d = copy_run(a, tmp_path / "bad_json")

@@ -18,7 +18,7 @@ import numpy as np
 from .. import __version__
 from ..core.units import ANGLE_UNITS, UNIT_SYMBOLS, angle_from_rad
 from . import plots
-from .io import atomic_output_dir, check_output, write_json, written_files
+from .io import OutputError, atomic_output_dir, check_output, write_json, written_files
 
 #: The fields of a run's summary.json that a comparison reads (dotted paths).
 _FIELDS = (
@@ -121,9 +121,15 @@ def compare_runs(run_dirs: list[str | Path], out: str | Path) -> dict:
     """Compare finished runs: a table of their statistics and overlaid histograms, written atomically to `out`.
 
     The runs must share one metric; they may be of different drives, and angles in different units are
-    shown in the first run's unit. `out` is refused when it is, holds or lies inside one of the runs.
+    shown in the first run's unit. `out` is refused when it is, holds or lies inside one of the runs, and when it
+    holds another run (a comparison replaces only a comparison or an empty folder of gearte's).
     """
-    check_output(out, inputs=run_dirs)
+    resolved = check_output(out, inputs=run_dirs)
+    if (resolved / "summary.json").is_file():
+        raise OutputError(
+            f"--out {out}: holds a gearte run (summary.json, samples); a comparison would replace it: "
+            "choose another folder for the comparison"
+        )
     runs = [(Path(d), *read_run(d)) for d in run_dirs]
     metrics = {r[1]["te"]["metric"] for r in runs}
     if len(metrics) > 1:
