@@ -233,6 +233,35 @@ def test_out_of_memory_is_reported_plainly(capsys, tmp_path, monkeypatch):
     assert "reduce its sample counts" in err
 
 
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--samples", "0"], "gearte run: error: argument --samples: must be ≥ 1, got 0 (see gearte run --help)"),
+        (["--samples", "\u0663"], "gearte run: error: argument --samples: expected a whole number, got '\u0663'"),
+        (["--seed", "1_0"], "gearte run: error: argument --seed: expected a whole number, got '1_0'"),
+    ],
+    ids=["zero", "arabic-indic digit", "underscore"],
+)
+def test_an_option_argparse_refuses_is_one_line(args, message, capsys, tmp_path):
+    with pytest.raises(SystemExit) as e:
+        cli.main(["run", str(RANDOM), "--out", str(tmp_path / "o"), *args])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and err.startswith(message) and err.count("\n") == 1, err
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_full_disk_names_the_results_folder_and_keeps_the_earlier_result(capsys, tmp_path, finished, monkeypatch):
+    import errno
+
+    res = copy_run(finished[0], tmp_path / "res")
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(run_mod, "_run", full)
+    refused(capsys, tmp_path, "run", RANDOM, "--out", res, message=f"--out {res}: No space left on device while writing", computing=True)
+
+
 def test_several_processes_check_the_study_file_and_the_folder_before_joining(capsys, tmp_path, monkeypatch):
     """Joining a several-process run waits for the other processes: a missing study file or a bad results folder is
     named before it, not after a time-out."""

@@ -17,6 +17,7 @@ still stops the run at its next phase, and always before its result is renamed i
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import shutil
@@ -216,6 +217,10 @@ def check_output(out: str | Path, *, inputs: Iterable[str | Path] = (), option: 
     return resolved
 
 
+#: Errors of writing to a full or failing disk (`atomic_output_dir` names the results folder for them).
+_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EROFS)
+
+
 @contextlib.contextmanager
 def atomic_output_dir(path: str | Path, *, inputs: Iterable[str | Path] = (), option: str = "--out") -> Iterator[Path]:
     """Yield a temporary folder beside `path`; when the block ends normally it replaces `path` (after
@@ -265,10 +270,15 @@ def atomic_output_dir(path: str | Path, *, inputs: Iterable[str | Path] = (), op
                 raise
             if old is not None:
                 shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
+    except BaseException as e:
         with deferred_interrupts(raise_after=False):
             shutil.rmtree(tmp, ignore_errors=True)
             _remove_created(created)
+        if isinstance(e, OSError) and e.errno in _FULL:  # the disk, not an input: name the results folder
+            raise OutputError(
+                f"{option} {path}: {e.strerror or e} while writing the results; nothing was replaced (free space, or "
+                f"choose another {option})"
+            ) from None
         raise
 
 

@@ -15,12 +15,13 @@ import dataclasses
 import importlib
 import json
 import os
+import re
 import shlex
 import signal
 import sys
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from .. import __version__
 from ..core.cache import cache_wanted, enable_compilation_cache
@@ -65,21 +66,29 @@ def _lazy(name: str) -> Any:
     return globals()[name] if name in globals() else __getattr__(name)
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser with its errors in one line, as every other gearte error (argparse prints the usage first)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _whole(text: str) -> int:
+    """A whole number written in ASCII digits (Python's `int` also takes other scripts' digits and `1_000`)."""
+    if not re.fullmatch(r"\s*[+-]?[0-9]+\s*", text):
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}")
+    return int(text)
+
+
 def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    v = _whole(text)
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
     return v
 
 
 def _seed(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    v = _whole(text)
     if not 0 <= v < 2**63:
         raise argparse.ArgumentTypeError(f"must be in [0, 2^63), got {v}")
     return v
@@ -137,9 +146,7 @@ def _confirm(args, study: Study) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="gearte", description="Transmission error of gear drives from their manufacturing and assembly errors."
-    )
+    p = _Parser(prog="gearte", description="Transmission error of gear drives from their manufacturing and assembly errors.")
     p.add_argument("--version", action="version", version=f"gearte {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run a study file and write its results folder")
@@ -170,7 +177,7 @@ def _parser() -> argparse.ArgumentParser:
         "every process runs the same command; each computes its share of the samples, process 0 writes the results",
     )
     d.add_argument("--processes", type=_positive_int, help="number of processes (with --process-id and --coordinator)")
-    d.add_argument("--process-id", type=int, help="this process's number, 0 … processes − 1")
+    d.add_argument("--process-id", type=_whole, help="this process's number, 0 … processes − 1")
     d.add_argument("--coordinator", help="HOST:PORT of process 0's coordination service")
     d.add_argument(
         "--cluster", action="store_true", help="take processes, ids and coordinator from the cluster scheduler's environment (e.g. SLURM)"
@@ -191,8 +198,8 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("--module", required=True, type=float, help="normal module m, mm")
     g.add_argument("--diameter", required=True, type=float, help="reference diameter d, mm")
     g.add_argument("--face-width", type=float, help="face width b, mm (needed for F_beta; F_beta is null without it)")
-    g.add_argument("--teeth", type=int, help="number of teeth z (optional; range-checked only)")
-    g.add_argument("--grade", required=True, type=int, help="whole accuracy grade")
+    g.add_argument("--teeth", type=_whole, help="number of teeth z (optional; range-checked only)")
+    g.add_argument("--grade", required=True, type=_whole, help="whole accuracy grade")
     _identify_parsers(sub)
     return p
 
@@ -210,12 +217,12 @@ def _identify_parsers(sub) -> None:
     p.add_argument("--ratio", type=float, help="transmission ratio (default: the drive's)")
     p.add_argument("--adjust", default="", help="comma-separated sources to turn at re-assembly (any angle), e.g. sun_manufacturing")
     p.add_argument("--fit", default="", help="grid drives: comma-separated sources to identify (default: all; the others stay at zero)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's starts")
+    p.add_argument("--seed", type=_whole, default=0, help="seed of the optimiser's starts")
     a = sub.add_parser("assemble", help="selective assembly of a batch of measured parts")
     a.add_argument("parts", help="CSV of parts: source,magnitude_um,phase_rad (or phase_deg), one row per part")
     a.add_argument("--study", required=True, help="study file (TOML) of the drive")
     a.add_argument("--out", required=True, help="results folder (new, empty, or an earlier gearte result)")
-    a.add_argument("--seed", type=int, default=0, help="seed of the random start and of the random assemblies")
+    a.add_argument("--seed", type=_whole, default=0, help="seed of the random start and of the random assemblies")
     a.add_argument("--random-batches", type=_positive_int, default=100, help="random assemblies of the same parts for the comparison (≥ 1)")
 
 
