@@ -4,6 +4,7 @@ Each check runs in a fresh interpreter (a subprocess), since this one has JAX lo
 """
 
 import ast
+import importlib
 import json
 import os
 import subprocess
@@ -65,6 +66,24 @@ def test_every_public_name_resolves_and_is_declared_for_type_checkers():
         gearte.no_such_name  # noqa: B018
 
 
+def test_the_registry_imports_a_drive_only_when_its_class_is_asked_for():
+    """A study of one drive imports that drive's modules only (the cycloid-pin and RV modules take a second to
+    import); every registered name is its class's `type_name`."""
+    code = (
+        "import json, sys; from gearte.drives.registry import DRIVES; names = sorted(DRIVES); "
+        "before = sorted(m for m in sys.modules if m.startswith('gearte.drives.')); DRIVES['planetary_2kh']; "
+        "after = sorted(m for m in sys.modules if m.startswith('gearte.drives.')); print(json.dumps([names, before, after]))"
+    )
+    names, before, after = fresh(code)
+    assert names == sorted(["planetary_2kh", "explicit", "harmonic", "cycloid_pin", "rv_khv", "helical_planetary"])
+    assert before == ["gearte.drives.registry"]
+    assert "gearte.drives.planetary_2kh" in after and not any("cycloid" in m or "rv_khv" in m or "helical" in m for m in after)
+    from gearte.drives import DRIVES
+
+    for name in DRIVES:
+        assert DRIVES[name].type_name == name
+
+
 def test_gearte_drives_exports_every_drive_and_the_helical_model_on_first_use():
     import gearte.drives as drives
 
@@ -72,9 +91,12 @@ def test_gearte_drives_exports_every_drive_and_the_helical_model_on_first_use():
         assert getattr(drives, cls.__name__) is cls, name
     # The helical names load with their modules (diffrax) on first use, and are the top-level ones.
     assert "diffrax" not in fresh("import gearte.drives; " + LOADED.replace(repr(HEAVY), repr(("diffrax",))))
-    lazy = set(drives._LAZY)
-    assert lazy <= set(dir(drives))
-    for name in lazy | {"RVKHV", "RVResponse"}:
+    # Every name of the package loads on first use (drives._LAZY); the helical and RV ones are also top-level names.
+    assert set(drives._LAZY) <= set(dir(drives))
+    for name, module in drives._LAZY.items():
+        assert getattr(drives, name) is getattr(importlib.import_module(module, "gearte.drives"), name), name
+    helical = {n for n, m in drives._LAZY.items() if m.startswith(".helical")}
+    for name in helical | {"RVKHV", "RVResponse"}:
         assert getattr(drives, name) is getattr(gearte, name), name
     with pytest.raises(AttributeError, match="no_such_name"):
         drives.no_such_name  # noqa: B018

@@ -6,11 +6,10 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ..core.schema import Table
-from ..drives.cycloid_pin import CycloidPin
-from ..optimise.modification import ModificationSpec, modification_report, modification_summary
 from .kind_base import AbstractStudyKind, KindOutcome
 
 if TYPE_CHECKING:
+    from ..optimise.modification import ModificationSpec
     from .config import Study
 
 
@@ -19,10 +18,16 @@ class Modification(AbstractStudyKind):
 
     table = "modification"
 
+    # The cycloid-pin modules load with the first study that has this table (a study of another drive needs none).
     def read(self, t: Table, study: Study) -> ModificationSpec:
+        from ..optimise.modification import ModificationSpec
+
         return ModificationSpec.from_table(t, study.drive)
 
     def run(self, study: Study, spec: ModificationSpec, *, progress: bool | None) -> KindOutcome:
+        from ..drives.cycloid_pin import CycloidPin
+        from ..optimise.modification import modification_report, modification_summary
+
         del progress
         drive = study.drive
         assert isinstance(drive, CycloidPin)  # checked when the table was read

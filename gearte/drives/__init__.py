@@ -1,45 +1,31 @@
 """Drive models: the protocol every drive implements, one file per drive, and the registry.
 
-The helical dynamic model's names (`HelicalPlanetary` and its parts) load on first use: they import
-diffrax, which the kinematic drives do not need.
+Every name loads its module on first use (`gearte.drives.registry` too imports a drive's module only when its class
+is asked for): a study of one drive imports that drive, and the helical dynamic model's names import diffrax only
+when used.
 """
 
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from . import cycloid_pin as cycloid_pin, harmonic as harmonic, wang2013 as wang2013
-from .cycloid_pin import (
-    Clearances as Clearances,
-    CycloidAnalysis as CycloidAnalysis,
-    CycloidErrors as CycloidErrors,
-    CycloidModification as CycloidModification,
-    CycloidPin as CycloidPin,
-    LoadedPairs as LoadedPairs,
-    LoadedPairsMin as LoadedPairsMin,
-    LostMotion as LostMotion,
-    LostMotionMin as LostMotionMin,
-    RotationErrorPeakToPeak as RotationErrorPeakToPeak,
-)
-from .explicit import ExplicitDrive as ExplicitDrive, ExplicitTerm as ExplicitTerm
-from .harmonic import HarmonicDrive as HarmonicDrive, HarmonicRunSettings as HarmonicRunSettings, HarmonicSource as HarmonicSource
-from .planetary_2kh import Planetary2KH as Planetary2KH, member_speeds as member_speeds
-from .protocol import (
-    AbstractDrive as AbstractDrive,
-    AbstractGridDrive as AbstractGridDrive,
-    AbstractSinusoidalDrive as AbstractSinusoidalDrive,
-    AbstractStudyContext as AbstractStudyContext,
-    Eccentricity as Eccentricity,
-    Figure as Figure,
-    SourceSpec as SourceSpec,
-    StudyOutputs as StudyOutputs,
-    Trace as Trace,
-)
-from .helical_drive import HelicalPlanetaryDrive as HelicalPlanetaryDrive, HelicalResponse as HelicalResponse
-from .registry import DRIVES as DRIVES
-from .rv_khv import RVKHV as RVKHV, RVResponse as RVResponse
-
 if TYPE_CHECKING:
+    from . import cycloid_pin as cycloid_pin, harmonic as harmonic, wang2013 as wang2013
+    from .cycloid_pin import (
+        Clearances as Clearances,
+        CycloidAnalysis as CycloidAnalysis,
+        CycloidErrors as CycloidErrors,
+        CycloidModification as CycloidModification,
+        CycloidPin as CycloidPin,
+        LoadedPairs as LoadedPairs,
+        LoadedPairsMin as LoadedPairsMin,
+        LostMotion as LostMotion,
+        LostMotionMin as LostMotionMin,
+        RotationErrorPeakToPeak as RotationErrorPeakToPeak,
+    )
+    from .explicit import ExplicitDrive as ExplicitDrive, ExplicitTerm as ExplicitTerm
+    from .harmonic import HarmonicDrive as HarmonicDrive, HarmonicRunSettings as HarmonicRunSettings, HarmonicSource as HarmonicSource
     from .helical import DynamicResponse as DynamicResponse, HelicalPlanetary as HelicalPlanetary, load_helical as load_helical
+    from .helical_drive import HelicalPlanetaryDrive as HelicalPlanetaryDrive, HelicalResponse as HelicalResponse
     from .helical_geometry import HelicalStage as HelicalStage
     from .helical_modifications import StageModifications as StageModifications, ToothModification as ToothModification
     from .helical_solve import PeriodicSolver as PeriodicSolver
@@ -50,11 +36,49 @@ if TYPE_CHECKING:
         SlicedStiffness as SlicedStiffness,
         TransverseStiffness as TransverseStiffness,
     )
+    from .planetary_2kh import Planetary2KH as Planetary2KH, member_speeds as member_speeds
+    from .protocol import (
+        AbstractDrive as AbstractDrive,
+        AbstractGridDrive as AbstractGridDrive,
+        AbstractSinusoidalDrive as AbstractSinusoidalDrive,
+        AbstractStudyContext as AbstractStudyContext,
+        Eccentricity as Eccentricity,
+        Figure as Figure,
+        SourceSpec as SourceSpec,
+        StudyOutputs as StudyOutputs,
+        Trace as Trace,
+    )
+    from .registry import DRIVES as DRIVES
+    from .rv_khv import RVKHV as RVKHV, RVResponse as RVResponse
 
+#: The submodules that are names of this package (``gearte.drives.wang2013``).
+_SUBMODULES = ("cycloid_pin", "harmonic", "wang2013")
 _LAZY = {
+    **dict.fromkeys(
+        (
+            "Clearances",
+            "CycloidAnalysis",
+            "CycloidErrors",
+            "CycloidModification",
+            "CycloidPin",
+            "LoadedPairs",
+            "LoadedPairsMin",
+            "LostMotion",
+            "LostMotionMin",
+            "RotationErrorPeakToPeak",
+        ),
+        ".cycloid_pin",
+    ),
+    "ExplicitDrive": ".explicit",
+    "ExplicitTerm": ".explicit",
+    "HarmonicDrive": ".harmonic",
+    "HarmonicRunSettings": ".harmonic",
+    "HarmonicSource": ".harmonic",
     "DynamicResponse": ".helical",
     "HelicalPlanetary": ".helical",
     "load_helical": ".helical",
+    "HelicalPlanetaryDrive": ".helical_drive",
+    "HelicalResponse": ".helical_drive",
     "HelicalStage": ".helical_geometry",
     "StageModifications": ".helical_modifications",
     "ToothModification": ".helical_modifications",
@@ -64,16 +88,38 @@ _LAZY = {
     "SinglePairStiffness": ".helical_stiffness",
     "SlicedStiffness": ".helical_stiffness",
     "TransverseStiffness": ".helical_stiffness",
+    "Planetary2KH": ".planetary_2kh",
+    "member_speeds": ".planetary_2kh",
+    **dict.fromkeys(
+        (
+            "AbstractDrive",
+            "AbstractGridDrive",
+            "AbstractSinusoidalDrive",
+            "AbstractStudyContext",
+            "Eccentricity",
+            "Figure",
+            "SourceSpec",
+            "StudyOutputs",
+            "Trace",
+        ),
+        ".protocol",
+    ),
+    "DRIVES": ".registry",
+    "RVKHV": ".rv_khv",
+    "RVResponse": ".rv_khv",
 }
 
 
 def __getattr__(name: str) -> Any:
-    if name not in _LAZY:
+    if name in _SUBMODULES:
+        value = importlib.import_module(f".{name}", __name__)
+    elif name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+    else:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_LAZY[name], __name__), name)
     globals()[name] = value  # the next access is a plain attribute
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *_LAZY})
+    return sorted({*globals(), *_LAZY, *_SUBMODULES})
