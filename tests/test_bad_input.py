@@ -199,6 +199,23 @@ def test_study_file_mistakes_named_by_check_and_run(old, new, message, capsys, t
         load_study(cfg)
 
 
+def test_a_te_far_past_small_errors_is_warned_of(capsys, tmp_path):
+    """A module a thousand times too small (a unit slip) gives a TE of radians: the run finishes, and says so in its
+    output, its report and its summary; the example itself gives no warning."""
+    cfg = tmp_path / "s.toml"
+    text = RANDOM.read_text()
+    assert "module_mm = 1.0" in text
+    cfg.write_text(text.replace("module_mm = 1.0", "module_mm = 0.001"))
+    assert cli.main(["run", str(cfg), "--out", str(tmp_path / "o"), "--samples", "16"]) == 0
+    err = capsys.readouterr().err
+    assert "gearte: warning: the peak reaches" in err and "far past the small errors" in err
+    assert "**Warning:** the peak reaches" in (tmp_path / "o" / "report.md").read_text()
+    assert len(json.loads((tmp_path / "o" / "summary.json").read_text())["warnings"]) == 1
+    assert cli.main(["run", str(RANDOM), "--out", str(tmp_path / "ok"), "--samples", "16"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    assert "warnings" not in json.loads((tmp_path / "ok" / "summary.json").read_text())
+
+
 @pytest.mark.parametrize(
     "example, old, message",
     [

@@ -14,6 +14,7 @@ import importlib
 import importlib.metadata
 import math
 import platform
+import sys
 import threading
 import time
 from pathlib import Path
@@ -133,6 +134,9 @@ CONFIRM_BYTES = 2 * 2**30
 #: Per-sample results (bytes) above which a plain study (no study kinds, no per-sample drive outputs) is
 #: streamed: statistics accumulated chunk by chunk (`gearte.studies.streaming`), nothing held per sample.
 HOLD_BYTES = 64 * 2**20
+#: An angle metric beyond this (rad, about 2.9°) is far past the small errors every drive's model assumes (TE of arc
+#: seconds to minutes): the run warns, in its output, report and summary (``warnings``).
+SMALL_ANGLE_RAD = 0.05
 
 
 @dataclasses.dataclass(frozen=True)
@@ -443,6 +447,13 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
         f"over {tr.span_revs} input revolutions",
         marks=[(tr.theta_max / (2 * math.pi), mx, f"max {mx:.1f}{sym}"), (tr.theta_min / (2 * math.pi), mn, f"min {mn:.1f}{sym}")],
     )
+    largest = max(abs(stats.min), abs(stats.max))
+    if angle and largest / float(angle_from_rad(1.0, study.unit)) > SMALL_ANGLE_RAD:
+        summary["warnings"] = [
+            f"the {study.metric.name} reaches {largest:.4g}{sym}, beyond {SMALL_ANGLE_RAD:g} rad: far past the small errors "
+            "the drive's model assumes; check the drive's dimensions and their units against the error magnitudes"
+        ]
+        print(f"gearte: warning: {summary['warnings'][0]}", file=sys.stderr)
     summary["timing_s"]["total"] = time.perf_counter() - t_start
     text = report(study, summary, errs, tr)
     for o in outcomes:
@@ -488,9 +499,9 @@ def report(study: Study, s: dict, errs: dict, tr) -> str:
     ]
     if s["study"]["command"]:
         lines += ["Reproduce with:", "", f"    {s['study']['command']}", ""]
+    lines += ["## Result", ""]
+    lines += [f"**Warning:** {w}." for w in s.get("warnings", ())] + ([""] if s.get("warnings") else [])
     lines += [
-        "## Result",
-        "",
         f"{study.metric.describe()}, {shown}, over {te['n']:,} samples:",
         "",
         "| n | min | max | mean | std | " + " | ".join(f"P{p:g}" for p in PERCENTILES) + " |",
