@@ -29,7 +29,7 @@ import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..core.schema import ConfigError, Table, parse_angle
+from ..core.schema import ConfigError, OptionError, Table, parse_angle
 from ..core.units import ANGLE_UNITS, ARCSEC_PER_RAD
 
 if TYPE_CHECKING:
@@ -128,11 +128,11 @@ def study_header(st: Table, *, samples: int | None, seed: int | None) -> dict:
         raise ConfigError("[study] notes: expected a list of strings")
     if samples is not None:
         if not 1 <= samples < 2**32:
-            raise ConfigError(f"--samples: must be in [1, 2³² − 1], got {samples}")
+            raise OptionError(f"--samples: must be in [1, 2³² − 1], got {samples}")
         n = samples
     if seed is not None:
         if not 0 <= seed < 2**63:
-            raise ConfigError(f"--seed: must be in [0, 2⁶³), got {seed}")
+            raise OptionError(f"--seed: must be in [0, 2⁶³), got {seed}")
         s = seed
     return {
         "name": name,
@@ -151,6 +151,8 @@ def load_study(path: str | Path, *, samples: int | None = None, seed: int | None
     raw = read_toml(path)
     try:
         return build_study(raw, str(path), samples=samples, seed=seed)
+    except OptionError:
+        raise
     except ConfigError as e:
         raise ConfigError(f"{path}: {e}") from None
 
@@ -186,6 +188,8 @@ def check_file(path: str | Path, *, samples: int | None = None, seed: int | None
     raw = read_toml(path)
     try:
         _read_file(raw, samples=samples, seed=seed)
+    except OptionError:
+        raise
     except ConfigError as e:
         raise ConfigError(f"{path}: {e}") from None
 

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 from .. import __version__
 from ..core.cache import cache_wanted, enable_compilation_cache
-from ..core.schema import ConfigError
+from ..core.schema import ConfigError, OptionError
 from .io import OutputError, check_output, deferred_interrupts, interrupt_received, reset_interrupts, sigterm_as_interrupt
 
 if TYPE_CHECKING:
@@ -245,6 +245,9 @@ def main(argv: list[str] | None = None) -> int:
             if interrupt_received() is not None:
                 raise KeyboardInterrupt
             return status
+    except OptionError as e:  # an option or environment variable, not the file
+        print(f"gearte: error: {e}", file=sys.stderr)
+        return 2
     except ConfigError as e:
         print(f"gearte: error in config: {e}", file=sys.stderr)
         return 2
@@ -322,7 +325,7 @@ def _cores_as_devices() -> None:
     wanted = os.environ.get("GEARTE_CPU_DEVICES", "").strip()
     if wanted:
         if not wanted.isdigit() or int(wanted) < 1:
-            raise ConfigError(f"GEARTE_CPU_DEVICES: a whole number ≥ 1 of CPU devices, got {wanted!r}")
+            raise OptionError(f"GEARTE_CPU_DEVICES: a whole number ≥ 1 of CPU devices, got {wanted!r}")
         count = int(wanted)
     else:
         count = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

@@ -19,6 +19,11 @@ class ConfigError(ValueError):
     """A configuration file is invalid; the message names the field and the fix."""
 
 
+class OptionError(ConfigError):
+    """A command-line option or environment variable that overrides a configuration is invalid: its message names
+    the option, not the file."""
+
+
 _MISSING = object()
 
 
