@@ -167,8 +167,9 @@ def test_a_pipe_a_device_or_a_huge_file_as_the_study_file(capsys, tmp_path, monk
     """Only a regular file is read: a pipe would block `check` for ever, /dev/zero would never end."""
     fifo = tmp_path / "s.toml"
     os.mkfifo(fifo)
-    refused(capsys, tmp_path, "check", fifo, message=f"{fifo}: not a regular file")
-    refused(capsys, tmp_path, "check", "/dev/zero", message="/dev/zero: not a regular file")
+    for path in (fifo, "/dev/zero"):  # in a command of its own, so that a regression fails by the time-out, not hangs
+        r = subprocess.run([sys.executable, "-m", "gearte", "check", str(path)], cwd=ROOT, capture_output=True, text=True, timeout=60)
+        assert r.returncode == 2 and f"{path}: not a regular file" in r.stderr and "Traceback" not in r.stderr, r.stderr
     big = tmp_path / "big.toml"
     with big.open("wb") as f:
         f.truncate(17 * 2**20)  # sparse: 17 MiB of nothing
@@ -236,6 +237,16 @@ def test_a_study_kinds_sample_counts_beyond_one_key_named_by_check_and_run(examp
     cfg.write_text(text.replace(old, f"{key} = {2**40} "))
     refused(capsys, tmp_path, "check", cfg, message=message)
     refused(capsys, tmp_path, "run", cfg, "--out", tmp_path / "o", message=message, monkeypatch=monkeypatch)
+
+
+def test_gearte_cpu_devices_in_ascii_digits_only():
+    # Read before JAX is imported: each value in a command of its own.
+    for value in ("0", "\u0663", "\u00b2"):
+        env = {**os.environ, "GEARTE_CPU_DEVICES": value}
+        r = subprocess.run(
+            [sys.executable, "-m", "gearte", "check", str(RANDOM)], cwd=ROOT, capture_output=True, text=True, env=env, timeout=120
+        )
+        assert r.returncode == 2 and r.stderr.startswith("gearte: error: GEARTE_CPU_DEVICES: a whole number"), (value, r.stderr)
 
 
 def test_out_of_memory_is_reported_plainly(capsys, tmp_path, monkeypatch):

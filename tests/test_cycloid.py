@@ -801,3 +801,18 @@ def test_polynomial_sines_and_arctangent_agree_with_numpy():
         u, v = t / za, t * (za + 1) / za
         want = np.stack([np.sin(u), np.cos(u), np.sin(v), np.cos(v)])
         assert np.max(np.abs(got - want)) < 1.2e-15, za
+
+
+def test_checked_errors_takes_plain_numbers_arrays_and_lists_of_traced_values():
+    """Per-pin fields may come as a scalar, an array or a list, of numbers or of JAX values (traced ones too, under jit
+    and grad); each is broadcast to one value per pin, with the same result."""
+    d = basic()
+
+    def total(x):
+        return jnp.sum(cp.checked_errors(d, {"pin_radial": [x] * d.z_pins, "infeed": x}).pin_radial)
+
+    assert float(jax.jit(total)(1.5)) == 1.5 * d.z_pins
+    assert float(jax.grad(total)(1.5)) == d.z_pins
+    for given in (2.0, [2.0], np.full(d.z_pins, 2.0), jnp.full(d.z_pins, 2.0), [jnp.asarray(2.0)] * d.z_pins):
+        e = cp.checked_errors(d, {"pin_radial": given})
+        np.testing.assert_array_equal(np.asarray(e.pin_radial), np.full(d.z_pins, 2.0))

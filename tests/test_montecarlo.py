@@ -111,6 +111,8 @@ def test_statistics_of_values_whose_squares_overflow_stay_finite():
     s = gearte.statistics(x)
     assert math.isfinite(s.std)
     assert s.std == pytest.approx(np.std([1.0, 2.0, 3.0, 4.0], ddof=1) * 1e300, rel=1e-15)
+    t = gearte.statistics([1e308, 1.5e308])  # their sum overflows too
+    assert t.mean == pytest.approx(1.25e308, rel=1e-15) and math.isfinite(t.std)
 
 
 class _CountingResponse(gearte.TEStudy):

@@ -283,6 +283,29 @@ def test_a_grid_taken_in_sectors_gives_the_te_of_each_angle_solved_alone():
     assert np.max(np.abs(alone)) > 1e-5  # rad: the errors move the output by arc seconds
 
 
+def test_the_solve_order_keeps_neighbours_within_a_sector_and_is_the_phase_order_on_a_prime_grid():
+    """Warm starts go from each angle to its neighbour in `solve_order`: on the example's 97 angles (prime) the order
+    of the eccentrics' phase, on 360 angles with z_c = 39 (g = 3) three sectors of 120°, each in the phase's order,
+    so that no neighbour is a sector away (in the phase's order alone, two of every three are)."""
+    from gearte.drives.rv_khv import solve_order
+
+    for p in (97, 360):
+        th = 2 * np.pi * np.arange(p) / p
+        order = np.asarray(solve_order(39, jnp.asarray(th)))
+        assert sorted(order.tolist()) == list(range(p))
+        phase = np.mod(39 * th, 2 * np.pi)
+        if p == 97:
+            np.testing.assert_array_equal(order, np.argsort(phase, kind="stable"))
+        else:
+            sector = np.floor(th[order] / (2 * np.pi / 3) + 1e-9)
+            assert np.all(np.diff(sector) >= 0)  # sector after sector
+            for k in range(3):
+                assert np.all(np.diff(phase[order][sector == k]) > 0)  # each in the phase's order
+            gap = np.abs(np.diff(th[order]))
+            plain = np.abs(np.diff(th[np.argsort(phase, kind="stable")]))
+            assert np.max(gap[np.diff(sector) == 0]) < 2 * np.pi / 3 and np.mean(plain > 2 * np.pi / 3 - 1e-9) > 0.6
+
+
 def test_gradients_match_finite_differences(drive):
     """d(lost motion)/d(tolerance) by the implicit-function theorem against float64 central differences."""
 

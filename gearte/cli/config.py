@@ -92,9 +92,10 @@ def read_toml(path: Path) -> dict:
             raise ConfigError(f"{path}: is a folder, not a study file")
         if not stat.S_ISREG(info.st_mode):
             raise ConfigError(f"{path}: not a regular file (a pipe, device or socket); give the study file itself")
-        if info.st_size > MAX_STUDY_FILE_BYTES:
-            raise ConfigError(f"{path}: {info.st_size:,} bytes; a study file is TOML text of a few kB (at most 16 MiB)")
-        data = path.read_bytes()
+        with path.open("rb") as f:
+            data = f.read(MAX_STUDY_FILE_BYTES + 1)  # the size on disk may be stale or 0 (a file of /proc)
+        if max(info.st_size, len(data)) > MAX_STUDY_FILE_BYTES:
+            raise ConfigError(f"{path}: over 16 MiB; a study file is TOML text of a few kB (at most 16 MiB)")
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except IsADirectoryError:

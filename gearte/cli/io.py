@@ -247,9 +247,11 @@ def atomic_output_dir(path: str | Path, *, inputs: Iterable[str | Path] = (), op
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; results are ordinary folders
+    writing = True  # the block's own work (computing, writing into tmp); then the replacement of `path`
     try:
         commit_point()
         yield tmp
+        writing = False
         commit_point()
         with deferred_interrupts(raise_after=False):
             check_output(path, inputs=inputs, option=option)  # still ours to replace
@@ -274,7 +276,13 @@ def atomic_output_dir(path: str | Path, *, inputs: Iterable[str | Path] = (), op
         with deferred_interrupts(raise_after=False):
             shutil.rmtree(tmp, ignore_errors=True)
             _remove_created(created)
-        if isinstance(e, OSError) and e.errno in _FULL:  # the disk, not an input: name the results folder
+        if (
+            writing
+            and isinstance(e, OSError)
+            and e.errno in _FULL
+            and _inside(Path(os.path.abspath(e.filename)) if e.filename else tmp, tmp)
+        ):
+            # the disk filled (or failed) under the new results: name the results folder
             raise OutputError(
                 f"{option} {path}: {e.strerror or e} while writing the results; nothing was replaced (free space, or "
                 f"choose another {option})"

@@ -290,15 +290,15 @@ def _distributed(args) -> None:
     if not any(given) and not cluster:
         return
     if cluster and any(given):
-        raise ConfigError(
+        raise OptionError(
             "--cluster takes the processes from the scheduler: give it alone, or give --processes, --process-id and --coordinator"
         )
     if not cluster and not all(given):
-        raise ConfigError("several processes need all three of --processes, --process-id and --coordinator (HOST:PORT)")
+        raise OptionError("several processes need all three of --processes, --process-id and --coordinator (HOST:PORT)")
     if not cluster and not 0 <= args.process_id < args.processes:
-        raise ConfigError(f"--process-id must be in 0 … {args.processes - 1}, got {args.process_id}")
+        raise OptionError(f"--process-id must be in 0 … {args.processes - 1}, got {args.process_id}")
     if not cluster and (":" not in args.coordinator or not args.coordinator.rpartition(":")[2].isdigit()):
-        raise ConfigError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
+        raise OptionError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
     import jax
 
     # CPU devices of different processes talk through gloo (GPUs use their own collectives).
@@ -307,7 +307,7 @@ def _distributed(args) -> None:
         try:
             jax.distributed.initialize()
         except ValueError as e:  # no scheduler's environment to read (JAX: "coordinator_address should be defined")
-            raise ConfigError(
+            raise OptionError(
                 f"--cluster: no cluster scheduler's environment found ({e}); run the command under the scheduler "
                 "(e.g. srun under SLURM), or give --processes, --process-id and --coordinator"
             ) from None
@@ -324,7 +324,7 @@ def _cores_as_devices() -> None:
         return
     wanted = os.environ.get("GEARTE_CPU_DEVICES", "").strip()
     if wanted:
-        if not wanted.isdigit() or int(wanted) < 1:
+        if not re.fullmatch(r"[0-9]+", wanted) or int(wanted) < 1:
             raise OptionError(f"GEARTE_CPU_DEVICES: a whole number ≥ 1 of CPU devices, got {wanted!r}")
         count = int(wanted)
     else:

@@ -313,6 +313,8 @@ def checked_errors(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] 
     out = {}
     for name in ALL_ERROR_FIELDS:
         v = given.get(name, 0.0)
+        if any(isinstance(leaf, jax.Array) for leaf in jax.tree_util.tree_leaves(v)):
+            v = jnp.asarray(v)  # JAX values (traced ones too), alone or in a list
         shape = np.shape(v)
         if name in PER_SPACE or name in PER_PIN:
             n = drive.z_lobes if name in PER_SPACE else drive.z_pins

@@ -47,6 +47,9 @@ class DriveRegistry(MutableMapping[str, "type[AbstractDrive]"]):
         del self._where[name]
         self._classes.pop(name, None)
 
+    def __contains__(self, name: object) -> bool:  # a name's presence imports nothing
+        return name in self._where
+
     def __iter__(self) -> Iterator[str]:
         return iter(self._where)
 

@@ -418,6 +418,14 @@ def _error_sources(cranks: int, discs: int, z_pins: int) -> dict[str, SourceSpec
     }
 
 
+def solve_order(z_c: int, thetas: Float[Array, " p"]) -> Array:
+    """The order in which `RVKHV.response` solves the output angles `thetas` (rad), each solve starting from the one
+    before: by the eccentrics' phase z_c θ_o mod 2π, in g = gcd(z_c, p) sectors of the revolution (`_response_jit`)."""
+    g = math.gcd(z_c, thetas.shape[0])
+    sector = jnp.floor(jnp.mod(thetas, TWO_PI) / (TWO_PI / g) + 1e-9)  # 1e-9: an angle on a sector's edge opens it
+    return jnp.argsort(jnp.mod(z_c * thetas, TWO_PI) + TWO_PI * sector)
+
+
 @eqx.filter_jit
 def _response_jit(drive: RVKHV, err, thetas) -> RVResponse:
     """Both load directions. Each solve starts from the solution at the previous angle in the order of the eccentrics'
@@ -429,9 +437,7 @@ def _response_jit(drive: RVKHV, err, thetas) -> RVResponse:
     i = output_index(drive)
     L = drive.stage.pin_circle_radius
     n = dof_count(drive.cranks, drive.discs)
-    g = math.gcd(drive.z_pins - 1, thetas.shape[0])
-    sector = jnp.floor(jnp.mod(thetas, TWO_PI) / (TWO_PI / g) + 1e-9)  # 1e-9: an angle on a sector's edge opens it
-    order = jnp.argsort(jnp.mod((drive.z_pins - 1) * thetas, TWO_PI) + TWO_PI * sector)
+    order = solve_order(drive.z_pins - 1, thetas)
     back = jnp.argsort(order)
 
     def direction(sign):
@@ -446,4 +452,4 @@ def _response_jit(drive: RVKHV, err, thetas) -> RVResponse:
     return RVResponse(thetas, te, tl, force, result, steps)
 
 
-__all__ = ("METRICS", "RVKHV", "SOURCES", "Eccentricity", "LostMotion", "PeakToPeak", "PeakToPeakReverse", "RVResponse")
+__all__ = ("METRICS", "RVKHV", "SOURCES", "Eccentricity", "LostMotion", "PeakToPeak", "PeakToPeakReverse", "RVResponse", "solve_order")

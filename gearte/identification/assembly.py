@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import operator
 from collections.abc import Mapping
 
 import jax
@@ -129,7 +130,11 @@ def assemble_batch(
     - `random_batches`: random assemblies of the same parts for the comparison.
     """
     specs = drive.error_sources
-    if isinstance(random_batches, bool) or not isinstance(random_batches, int) or random_batches < 1:
+    try:
+        batches = operator.index(random_batches)  # Python's and NumPy's integers
+    except TypeError:
+        batches = 0
+    if isinstance(random_batches, bool) or batches < 1:
         raise ValueError(f"random_batches: the comparison needs at least one random assembly (a whole number ≥ 1), got {random_batches!r}")
     if not parts:
         raise ValueError("parts: give at least one part type (source name → Eccentricity of the measured parts)")

@@ -350,14 +350,17 @@ def statistics(values, *, unit: str = "rad") -> Statistics:
     pct = np.percentile(v, PERCENTILES)
     with np.errstate(over="ignore", invalid="ignore"):
         std = float(v.std(ddof=1)) if v.size > 1 else 0.0
-    if not math.isfinite(std):  # squares beyond the float range (values above ~1e154): the same std, scaled
+    with np.errstate(over="ignore"):
+        mean = float(v.mean())
+    if not (math.isfinite(std) and math.isfinite(mean)):  # sums beyond the float range: the same figures, scaled
         scale = float(np.max(np.abs(v)))
-        std = scale * float((v / scale).std(ddof=1))
+        mean = scale * float((v / scale).mean())
+        std = scale * float((v / scale).std(ddof=1)) if v.size > 1 else 0.0
     return Statistics(
         n=int(v.size),
         min=float(v.min()),
         max=float(v.max()),
-        mean=float(v.mean()),
+        mean=mean,
         std=std,
         percentiles={_pct_key(p): float(x) for p, x in zip(PERCENTILES, pct)},
         unit=unit,
