@@ -9,7 +9,7 @@ import jax
 import numpy as np
 
 from ..core.metrics import Peak
-from ..core.schema import ConfigError, Table
+from ..core.schema import MAX_SAMPLES, ConfigError, Table
 from ..core.solution import is_successful, message
 from ..core.units import UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import AbstractSinusoidalDrive, Figure
@@ -96,9 +96,9 @@ class Allocation(AbstractStudyKind):
             objective=t.string("objective", "worst_case", choices=("worst_case", "expected", "robust")),
             datum=datum,
             adjust={n: ("relative" if r.to is not None else "absolute") for n, r in optimised.items()},
-            starts=t.integer("starts", 16, minimum=1, maximum=2**32 - 1),
-            surrogate_samples=t.integer("surrogate_samples", 512, minimum=16, maximum=2**32 - 1),
-            check_samples=t.integer("check_samples", 50_000, minimum=100, maximum=2**32 - 1),
+            starts=t.integer("starts", 16, minimum=1, maximum=MAX_SAMPLES),
+            surrogate_samples=t.integer("surrogate_samples", 512, minimum=16, maximum=MAX_SAMPLES),
+            check_samples=t.integer("check_samples", 50_000, minimum=100, maximum=MAX_SAMPLES),
             seed_rule=seed_rule,
         )
 

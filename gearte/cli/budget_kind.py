@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 import jax
 
 from ..core.metrics import AbstractMetric
-from ..core.schema import ConfigError, Table
+from ..core.schema import MAX_SAMPLES, ConfigError, Table
 from ..core.solution import is_successful, message
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import Figure
@@ -179,8 +179,8 @@ class Budget(AbstractStudyKind):
             raise ConfigError("[budget] pareto_specs: expected a list of positive numbers (specs of the first constraint)")
         return BudgetSpec(
             constraints=tuple(constraints),
-            samples=t.integer("samples", 4096, minimum=64, maximum=2**32 - 1),
-            check_samples=t.integer("check_samples", 50_000, minimum=1000, maximum=2**32 - 1),
+            samples=t.integer("samples", 4096, minimum=64, maximum=MAX_SAMPLES),
+            check_samples=t.integer("check_samples", 50_000, minimum=1000, maximum=MAX_SAMPLES),
             costs=costs,
             nominal=nominal,
             maximum={n: factor * nominal[n] for n in names},

@@ -29,7 +29,7 @@ import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..core.schema import ConfigError, OptionError, Table, parse_angle
+from ..core.schema import MAX_SAMPLES, ConfigError, OptionError, Table, parse_angle
 from ..core.units import ANGLE_UNITS, ARCSEC_PER_RAD
 
 if TYPE_CHECKING:
@@ -98,8 +98,6 @@ def read_toml(path: Path) -> dict:
             raise ConfigError(f"{path}: over 16 MiB; a study file is TOML text of a few kB (at most 16 MiB)")
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: is a folder, not a study file") from None
     except OSError as e:
         raise ConfigError(f"{path}: cannot read ({e.strerror})") from None
     try:
@@ -119,7 +117,7 @@ def study_header(st: Table, *, samples: int | None, seed: int | None) -> dict:
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
         raise ConfigError(f"[study] name: use letters, digits, '_', '.', '-' only, got {name!r}")
     n = st.integer("samples", None, minimum=1) if st.has("samples") else None  # None: the default, set by build_study
-    if n is not None and n >= 2**32:
+    if n is not None and n > MAX_SAMPLES:
         raise ConfigError(f"[study] samples: at most 2³² − 1 samples per seed, got {n}")
     s = st.integer("seed", minimum=0)
     if s >= 2**63:
@@ -128,7 +126,7 @@ def study_header(st: Table, *, samples: int | None, seed: int | None) -> dict:
     if not isinstance(notes, list) or not all(isinstance(x, str) for x in notes):
         raise ConfigError("[study] notes: expected a list of strings")
     if samples is not None:
-        if not 1 <= samples < 2**32:
+        if not 1 <= samples <= MAX_SAMPLES:
             raise OptionError(f"--samples: must be in [1, 2³² − 1], got {samples}")
         n = samples
     if seed is not None:

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..core.metrics import AbstractMetric
-from ..core.schema import ConfigError, Table
+from ..core.schema import MAX_SAMPLES, ConfigError, Table
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import Figure
 from ..studies.doe import (
@@ -219,7 +219,7 @@ class Doe(AbstractStudyKind):
         goal = t.string("goal", "maximise" if metric.higher_is_better else "minimise", choices=("minimise", "maximise"))
         statistic = _statistic(t)
         samples = t.integer("samples", DEFAULT_SAMPLES, minimum=1)
-        if samples >= 2**32:
+        if samples > MAX_SAMPLES:
             raise ConfigError(f"{t.where} samples: at most 2³² − 1, got {samples}")
         if statistic == "std" and samples < 2:
             raise ConfigError(f'{t.where} samples: response = "std" needs at least 2 samples, got {samples}')

@@ -7,7 +7,7 @@ import dataclasses
 import difflib
 from typing import TYPE_CHECKING
 
-from ..core.schema import ConfigError, Table
+from ..core.schema import MAX_SAMPLES, ConfigError, Table
 from ..studies.sensitivity_pathwise import pathwise_report, pathwise_sensitivities, pathwise_summary
 from .kind_base import AbstractStudyKind, KindOutcome
 
@@ -29,7 +29,7 @@ class Sensitivity(AbstractStudyKind):
     table = "sensitivity"
 
     def read(self, t: Table, study: Study) -> SensitivitySpec:
-        n = t.integer("pathwise_samples", 64, minimum=1, maximum=2**32 - 1)
+        n = t.integer("pathwise_samples", 64, minimum=1, maximum=MAX_SAMPLES)
         offered = study.drive.metrics
         names = t.get("pathwise_metrics", [study.metric.name])
         if not isinstance(names, list) or not names or not all(isinstance(x, str) for x in names):

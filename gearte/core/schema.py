@@ -19,6 +19,10 @@ class ConfigError(ValueError):
     """A configuration file is invalid; the message names the field and the fix."""
 
 
+#: The most samples of one study or study kind: sample i uses ``fold_in(key, i)`` with a 32-bit i.
+MAX_SAMPLES = 2**32 - 1
+
+
 class OptionError(ConfigError):
     """A command-line option or environment variable that overrides a configuration is invalid: its message names
     the option, not the file."""

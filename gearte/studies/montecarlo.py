@@ -29,6 +29,7 @@ from tqdm import tqdm
 from ..core.metrics import AbstractMetric
 from ..core.precision import require_x64
 from ..core.programs import kept_program
+from ..core.schema import MAX_SAMPLES
 from ..drives.protocol import AbstractDrive, AbstractSinusoidalDrive
 from .errors import ErrorModel
 
@@ -236,7 +237,7 @@ def monte_carlo(
     require_x64()
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
         raise ValueError(f"n_samples: must be a whole number ≥ 1, got {n_samples!r}")
-    if n_samples >= 2**32:
+    if n_samples > MAX_SAMPLES:
         raise ValueError(f"n_samples: at most 2³² − 1 samples per key, got {n_samples}")
     key = as_key(key)
     for name, v in (("chunk_size", chunk_size), ("block_size", block_size)):
