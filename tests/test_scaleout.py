@@ -139,6 +139,53 @@ def test_two_processes_write_the_single_process_results(single_run, tmp_path):
     assert json.loads((single_run / "summary.json").read_text())["te"] == s["te"]
 
 
+def test_each_process_keeps_its_programs_and_a_repeat_run_loads_them(study, tmp_path):
+    # JAX's compilation cache serves only process 0 of a several-process run (its key covers each process's own
+    # devices, and only process 0 writes it). gearte's program store keeps each process's Monte Carlo step under
+    # a key of its own and loads it onto every process's devices: a second run compiles no step, and its values are
+    # those of one process.
+    one = gearte.monte_carlo(study, key=3, n_samples=700, block_size=64, chunk_size=64)
+    store = tmp_path / "store"
+    script = textwrap.dedent(
+        f"""
+        import sys
+        import jax, numpy as np
+        jax.config.update("jax_enable_x64", True)
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
+        jax.distributed.initialize(coordinator_address=sys.argv[1], num_processes=2, process_id=int(sys.argv[2]))
+        import gearte
+        from gearte.cli.config import load_study
+        from gearte.core.programs import enable_program_store
+        kept = enable_program_store({str(store)!r})
+        s = load_study({PLANETARY!r})
+        st = gearte.TEStudy(s.drive, s.errors, metric=gearte.Peak())
+        r = gearte.monte_carlo(st, key=3, n_samples=700, block_size=64, chunk_size=64)
+        np.savez(sys.argv[3], values=r.values, devices=r.devices, saved=kept.saved, loaded=kept.loaded)
+        """
+    )
+    env = _env(XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    runs = []
+    for run in range(2):
+        coord = f"127.0.0.1:{_free_port()}"
+        outs = [tmp_path / f"run{run}_process{i}.npz" for i in (0, 1)]
+        procs = [
+            subprocess.Popen(
+                [sys.executable, "-c", script, coord, str(i), str(outs[i])], cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True
+            )
+            for i in (0, 1)
+        ]
+        errs = [p.communicate(timeout=300)[1] for p in procs]
+        assert [p.returncode for p in procs] == [0, 0], errs
+        runs.append([np.load(o) for o in outs])
+    first, second = runs
+    assert [int(r["saved"]) for r in first] == [1, 1] and [int(r["loaded"]) for r in first] == [0, 0]
+    assert [int(r["saved"]) for r in second] == [0, 0] and [int(r["loaded"]) for r in second] == [1, 1]
+    assert len(list(store.glob("*.program"))) == 2  # one step per process
+    for r in first + second:
+        assert int(r["devices"]) == 4
+        np.testing.assert_array_equal(r["values"], one.values)
+
+
 @pytest.mark.parametrize(
     "args, match",
     [

@@ -21,8 +21,12 @@ Where it is used: the Monte Carlo engine's step (`gearte.monte_carlo`) and the g
 decorated with `kept_jit` (an `eqx.filter_jit` that goes through the store: the cycloid-pin
 reference analyses). A program is kept only
 
-- for the CPU, in a single-process run (an executable belongs to its process's devices; the
-  CPU's LAPACK kernels are set up before a program is loaded, as lowering one would);
+- for the CPU (the CPU's LAPACK kernels are set up before a program is loaded, as lowering one
+  would). In a several-process run (`jax.distributed`) each process keeps its own programs: the key
+  covers the process's index, and a program computing on every process's devices is loaded onto the
+  devices of its inputs' mesh, in that order. JAX's own cache serves only process 0 there (its key
+  covers each process's local devices, and only process 0 writes it), so without the store the other
+  processes would compile the study's programs on every run;
 - when its key can be trusted: every pytree node class, and the class of every static value, comes
   from gearte, equinox, JAX, NumPy or Python's builtins (a user's own class could call code whose
   source the digest does not cover, or leave a value out of its `repr`),
@@ -97,7 +101,7 @@ def _environment() -> str:
     versions = _versions()
     config = sorted((k, repr(v)) for k, v in jax.config.values.items() if "compilation_cache" not in k and "persistent_cache" not in k)
     devices = [(d.platform, d.device_kind, d.id, d.process_index) for d in jax.devices()]
-    return repr((_source_digest(), versions, config, os.environ.get("XLA_FLAGS", ""), devices, jax.process_count()))
+    return repr((_source_digest(), versions, config, os.environ.get("XLA_FLAGS", ""), devices, jax.process_count(), jax.process_index()))
 
 
 def _value_types(value: Any, found: set[type]) -> set[type]:
@@ -238,8 +242,10 @@ class ProgramStore:
             from jax.experimental import serialize_executable
 
             with io.BytesIO() as buffer:
+                device_ids = _device_ids(program.compiled)
+                if device_ids is None:
+                    return
                 blob, in_tree, out_tree = serialize_executable.serialize(program.compiled)
-                device_ids = [d.id for d in program.compiled.runtime_executable().local_devices()]
                 record = (blob, in_tree, out_tree, device_ids, program.lapack, program.out_treedef, program.out_static)
                 _Pickler(buffer).dump(record)
                 payload = buffer.getvalue()
@@ -281,6 +287,22 @@ class ProgramStore:
                 p.unlink(missing_ok=True)
         except OSError:
             pass
+
+
+def _device_ids(compiled: Any) -> list[int] | None:
+    """The ids of the devices `compiled` runs on, in the order of its device assignment (what loading it needs).
+
+    In one process: the process's own devices of the executable. In a several-process run: the devices of its
+    inputs' mesh (every process's), or None when no input is laid out on a mesh spanning the processes; such a
+    program is kept in memory only.
+    """
+    if jax.process_count() == 1:
+        return [d.id for d in compiled.runtime_executable().local_devices()]
+    for sharding in jax.tree.leaves(compiled.input_shardings):
+        mesh = sharding.mesh.devices if isinstance(sharding, jax.sharding.NamedSharding) else None
+        if mesh is not None and len(sharding.device_set) == jax.device_count():
+            return [d.id for d in np.asarray(mesh).flat]
+    return None
 
 
 #: A call of the host from a compiled program (`jax.pure_callback`, `jax.debug.callback`, equinox's `error_if`).
@@ -363,8 +385,8 @@ def kept_program(
     inputs when called is dropped, and `fallback` answers.
     """
     store = _STORE[0]
-    # One executable per process's devices (not shared through a file); CPU only (the kernels set up above).
-    if store is None or jax.process_count() > 1 or jax.default_backend() != "cpu":
+    # CPU only (the kernels set up above); in a several-process run, one program per process (its key).
+    if store is None or jax.default_backend() != "cpu":
         return fallback
     key = program_key(name, (tree, args), *static)
     if key is None or key in store.refused:
