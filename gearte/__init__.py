@@ -69,12 +69,20 @@ if TYPE_CHECKING:
         ExplicitTerm as ExplicitTerm,
         HarmonicDrive as HarmonicDrive,
         HarmonicSource as HarmonicSource,
+        HelicalErrorPeakToPeak as HelicalErrorPeakToPeak,
+        HelicalPeakToPeak as HelicalPeakToPeak,
         HelicalPlanetaryDrive as HelicalPlanetaryDrive,
         HelicalResponse as HelicalResponse,
         Planetary2KH as Planetary2KH,
         SourceSpec as SourceSpec,
     )
-    from .drives.rv_khv import RVKHV as RVKHV, RVResponse as RVResponse
+    from .drives.rv_khv import (
+        RVKHV as RVKHV,
+        RVLostMotion as RVLostMotion,
+        RVPeakToPeak as RVPeakToPeak,
+        RVPeakToPeakReverse as RVPeakToPeakReverse,
+        RVResponse as RVResponse,
+    )
     from .drives.helical import DynamicResponse as DynamicResponse, HelicalPlanetary as HelicalPlanetary, load_helical as load_helical
     from .drives.helical_geometry import HelicalStage as HelicalStage
     from .drives.helical_modifications import (
@@ -270,8 +278,13 @@ _LAZY: dict[str, str] = {
     "DynamicResponse": ".drives.helical",
     "HelicalPlanetary": ".drives.helical",
     "RVKHV": ".drives.rv_khv",
+    "RVLostMotion": ".drives.rv_khv",
+    "RVPeakToPeak": ".drives.rv_khv",
+    "RVPeakToPeakReverse": ".drives.rv_khv",
     "RVResponse": ".drives.rv_khv",
     "load_helical": ".drives.helical",
+    "HelicalErrorPeakToPeak": ".drives",
+    "HelicalPeakToPeak": ".drives",
     "HelicalPlanetaryDrive": ".drives",
     "HelicalResponse": ".drives",
     "HelicalStage": ".drives.helical_geometry",
@@ -432,6 +445,8 @@ __all__ = [
     "GradeTable",
     "HarmonicDrive",
     "HarmonicSource",
+    "HelicalErrorPeakToPeak",
+    "HelicalPeakToPeak",
     "HelicalPlanetary",
     "HelicalPlanetaryDrive",
     "HelicalResponse",
@@ -459,6 +474,9 @@ __all__ = [
     "PeriodicSolver",
     "Planetary2KH",
     "Power",
+    "RVLostMotion",
+    "RVPeakToPeak",
+    "RVPeakToPeakReverse",
     "RVResponse",
     "Rayleigh",
     "Reciprocal",

@@ -343,12 +343,15 @@ def test_best_planet_assembly_is_a_coordinate_optimum_of_the_units_te():
     """The search's positions: no single planet's other position gives a smaller TE p-p (each checked through the
     drive's own response, not the search's batched one), the value is that of the drive at those positions, and
     it is not above the start's."""
+    from gearte.drives.rv_khv import RVPeakToPeak
     from gearte.optimise.rv_assembly import best_planet_assembly
 
     d = make(z_sun=12, z_planet=12, points=16)
     run_out = Eccentricity(jnp.asarray([12.0, 8.0, 10.0]), jnp.asarray([0.3, 2.0, 4.1]))
     errors = {"planet_eccentricity": run_out, "sun_eccentricity": Eccentricity(jnp.asarray([6.0]), jnp.asarray([1.0]))}
-    out = best_planet_assembly(d, errors, metric="peak_to_peak")
+    with pytest.raises(ValueError, match=r"metric: give a metric object such as gearte\.RVPeakToPeak"):
+        best_planet_assembly(d, errors, metric="peak_to_peak")  # type: ignore[arg-type]
+    out = best_planet_assembly(d, errors, metric=RVPeakToPeak())
     assert bool(out.result == RESULTS.successful)
     teeth = np.asarray(out.teeth)
     metric = d.metrics["peak_to_peak"]

@@ -19,7 +19,7 @@ import pytest
 
 from gearte.core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD
 from gearte.drives.protocol import AbstractStudyContext, Eccentricity
-from gearte.drives.rv_khv import RVKHV, LostMotion, PeakToPeak
+from gearte.drives.rv_khv import RVKHV, RVLostMotion, RVPeakToPeak
 from gearte.drives.rv_khv_outputs import (
     LOADED_FRACTION,
     alias_order,
@@ -233,7 +233,7 @@ SAMPLES: list[dict[str, Any]] = [
 ]
 
 
-@pytest.mark.parametrize("metric", [LostMotion(), PeakToPeak()], ids=lambda m: m.name)
+@pytest.mark.parametrize("metric", [RVLostMotion(), RVPeakToPeak()], ids=lambda m: m.name)
 def test_study_outputs_draw_every_figure_the_report_shows(drive, metric, tmp_path):
     from gearte.cli.run import _draw
 
@@ -266,3 +266,27 @@ def test_no_jax_arrays_leak_into_the_summary(undersize):
     s, _ = undersize
     leaves = jax.tree.leaves(s)
     assert not any(isinstance(x, jnp.ndarray) for x in leaves)
+
+
+def test_a_metric_of_another_drive_is_refused_naming_the_drives_own_classes():
+    # The cycloid-pin drive's lost motion has the RV reducer's metric name but not its meaning (a rigid disc on
+    # fixed pins): a study or budget given it is refused, and the message names the classes to use instead.
+    import gearte
+    from gearte.cli.config import load_study
+
+    study = load_study("examples/rv_robot_joint_tolerances.toml")
+    drive, model = study.drive, study.errors
+    source = next(iter(model.specs))
+    for make in (
+        lambda m: gearte.TEStudy(drive, model, metric=m),
+        lambda m: gearte.budget_problem(
+            drive, model, costs={source: gearte.Reciprocal(0.0, 1.0)}, nominal={source: 1.0}, spec=1e-4, metric=m
+        ),
+    ):
+        with pytest.raises(
+            ValueError,
+            match=r"offers gearte\.RVLostMotion\(\), gearte\.RVPeakToPeak\(\), gearte\.RVPeakToPeakReverse\(\); got gearte\.LostMotion\(\)",
+        ):
+            make(gearte.LostMotion())
+        make(gearte.RVLostMotion())  # the drive's own: accepted
+    assert {type(m) for m in drive.metrics.values()} == {gearte.RVLostMotion, gearte.RVPeakToPeak, gearte.RVPeakToPeakReverse}

@@ -105,3 +105,22 @@ class RMS(AbstractMetric):
 
     def describe(self) -> str:
         return "RMS of Δθ over the hyper-period (exact, by Parseval)"
+
+
+def public_name(cls: type) -> str:
+    """How a user writes class `cls`: ``gearte.Name`` when gearte exports it, else its module path."""
+    import gearte  # at call time: the package has loaded
+
+    if getattr(gearte, cls.__name__, None) is cls:
+        return f"gearte.{cls.__name__}"
+    return f"{cls.__module__}.{cls.__qualname__}"
+
+
+def check_offered(metric: Any, drive: Any, *, what: str = "metric") -> None:
+    """Raise a ValueError naming the drive's own metric classes unless `metric` is one of them (same name and
+    class: the cycloid-pin drive's ``lost_motion`` is not the RV reducer's)."""
+    offered = drive.metrics
+    if metric.name in offered and type(offered[metric.name]) is type(metric):
+        return
+    choices = ", ".join(f"{public_name(type(m))}()" for m in offered.values())
+    raise ValueError(f"{what}: {type(drive).__name__} offers {choices}; got {public_name(type(metric))}()")

@@ -26,7 +26,12 @@ if TYPE_CHECKING:
     from .explicit import ExplicitDrive as ExplicitDrive, ExplicitTerm as ExplicitTerm
     from .harmonic import HarmonicDrive as HarmonicDrive, HarmonicRunSettings as HarmonicRunSettings, HarmonicSource as HarmonicSource
     from .helical import DynamicResponse as DynamicResponse, HelicalPlanetary as HelicalPlanetary, load_helical as load_helical
-    from .helical_drive import HelicalPlanetaryDrive as HelicalPlanetaryDrive, HelicalResponse as HelicalResponse
+    from .helical_drive import (
+        HelicalErrorPeakToPeak as HelicalErrorPeakToPeak,
+        HelicalPeakToPeak as HelicalPeakToPeak,
+        HelicalPlanetaryDrive as HelicalPlanetaryDrive,
+        HelicalResponse as HelicalResponse,
+    )
     from .helical_geometry import HelicalStage as HelicalStage
     from .helical_modifications import StageModifications as StageModifications, ToothModification as ToothModification
     from .helical_solve import PeriodicSolver as PeriodicSolver
@@ -50,7 +55,13 @@ if TYPE_CHECKING:
         Trace as Trace,
     )
     from .registry import DRIVES as DRIVES
-    from .rv_khv import RVKHV as RVKHV, RVResponse as RVResponse
+    from .rv_khv import (
+        RVKHV as RVKHV,
+        RVLostMotion as RVLostMotion,
+        RVPeakToPeak as RVPeakToPeak,
+        RVPeakToPeakReverse as RVPeakToPeakReverse,
+        RVResponse as RVResponse,
+    )
 
 #: The submodules that are names of this package (``gearte.drives.wang2013``).
 _SUBMODULES = ("cycloid_pin", "harmonic", "wang2013")
@@ -78,6 +89,8 @@ _LAZY = {
     "DynamicResponse": ".helical",
     "HelicalPlanetary": ".helical",
     "load_helical": ".helical",
+    "HelicalErrorPeakToPeak": ".helical_drive",
+    "HelicalPeakToPeak": ".helical_drive",
     "HelicalPlanetaryDrive": ".helical_drive",
     "HelicalResponse": ".helical_drive",
     "HelicalStage": ".helical_geometry",
@@ -107,6 +120,9 @@ _LAZY = {
     ),
     "DRIVES": ".registry",
     "RVKHV": ".rv_khv",
+    "RVLostMotion": ".rv_khv",
+    "RVPeakToPeak": ".rv_khv",
+    "RVPeakToPeakReverse": ".rv_khv",
     "RVResponse": ".rv_khv",
 }
 

@@ -139,7 +139,7 @@ class HelicalPeakToPeak(AbstractMetric):
         return "peak-to-peak over the window's grid of the loaded TE = θ_sun − i θ_carrier (mesh stiffness variation and errors)"
 
 
-class ErrorPeakToPeak(AbstractMetric):
+class HelicalErrorPeakToPeak(AbstractMetric):
     """Peak-to-peak of the unit's TE minus the error-free stage's over the grid (rad): the errors' share."""
 
     name: ClassVar[str] = "error_peak_to_peak"
@@ -156,7 +156,7 @@ class ErrorPeakToPeak(AbstractMetric):
         return "peak-to-peak over the window's grid of the unit's loaded TE minus the error-free stage's (the errors' share)"
 
 
-METRICS: tuple[type[AbstractMetric], ...] = (HelicalPeakToPeak, ErrorPeakToPeak)
+METRICS: tuple[type[AbstractMetric], ...] = (HelicalPeakToPeak, HelicalErrorPeakToPeak)
 
 
 class HelicalPlanetaryDrive(AbstractGridDrive):
@@ -498,7 +498,7 @@ __all__ = (
     "METRICS",
     "AbstractHelicalAnalysis",
     "Dynamic",
-    "ErrorPeakToPeak",
+    "HelicalErrorPeakToPeak",
     "HelicalPeakToPeak",
     "HelicalPlanetaryDrive",
     "HelicalResponse",

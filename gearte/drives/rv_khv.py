@@ -86,7 +86,7 @@ class RVResponse(eqx.Module):
     steps: Array
 
 
-class LostMotion(AbstractMetric):
+class RVLostMotion(AbstractMetric):
     """Lost motion: TE(+) − TE(−) in the rigid limit, its maximum over the grid (rad)."""
 
     name: ClassVar[str] = "lost_motion"
@@ -102,7 +102,7 @@ class LostMotion(AbstractMetric):
         return "lost motion = output rotation between the forward and the reverse load with the input held, max over the grid"
 
 
-class PeakToPeak(AbstractMetric):
+class RVPeakToPeak(AbstractMetric):
     """Peak-to-peak TE under the forward load over the grid (rad)."""
 
     name: ClassVar[str] = "peak_to_peak"
@@ -118,7 +118,7 @@ class PeakToPeak(AbstractMetric):
         return "peak-to-peak of TE = θ_o − θ_in/i under the forward load over the output revolution's grid"
 
 
-class PeakToPeakReverse(AbstractMetric):
+class RVPeakToPeakReverse(AbstractMetric):
     """Peak-to-peak TE under the reverse load over the grid (rad)."""
 
     name: ClassVar[str] = "peak_to_peak_reverse"
@@ -134,7 +134,7 @@ class PeakToPeakReverse(AbstractMetric):
         return "peak-to-peak of TE under the reverse load over the output revolution's grid"
 
 
-METRICS: tuple[type[AbstractMetric], ...] = (LostMotion, PeakToPeak, PeakToPeakReverse)
+METRICS: tuple[type[AbstractMetric], ...] = (RVLostMotion, RVPeakToPeak, RVPeakToPeakReverse)
 
 #: (kind, shape key, unit, symbol, description) of every error source; shapes: "" scalar, "N" per crank,
 #: "D" per disc, "zp" per pin, "Dzc" per disc and tooth space (disc 1's spaces, then disc 2's), "DN" per disc and crank.
@@ -452,4 +452,14 @@ def _response_jit(drive: RVKHV, err, thetas) -> RVResponse:
     return RVResponse(thetas, te, tl, force, result, steps)
 
 
-__all__ = ("METRICS", "RVKHV", "SOURCES", "Eccentricity", "LostMotion", "PeakToPeak", "PeakToPeakReverse", "RVResponse", "solve_order")
+__all__ = (
+    "METRICS",
+    "RVKHV",
+    "SOURCES",
+    "Eccentricity",
+    "RVLostMotion",
+    "RVPeakToPeak",
+    "RVPeakToPeakReverse",
+    "RVResponse",
+    "solve_order",
+)

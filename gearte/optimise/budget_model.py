@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ..core.metrics import AbstractMetric, Peak
+from ..core.metrics import AbstractMetric, Peak, check_offered
 from ..drives.protocol import AbstractDrive, Eccentricity
 from ..studies.errors import ErrorModel
 from ..studies.laws import AbstractValueLaw
@@ -158,12 +158,10 @@ def budget_problem(
     constraints = tuple(constraints)
     if not constraints:
         raise ValueError("constraints: give at least one")
-    offered = drive.metrics
     for c in constraints:
         if not isinstance(c, Constraint):
             raise ValueError(f"constraints: expected gearte.Constraint objects, got {c!r}")
-        if c.metric.name not in offered:
-            raise ValueError(f"constraint metric {c.metric.name!r}: {type(drive).__name__} offers {list(offered)}")
+        check_offered(c.metric, drive, what="constraint metric")
     w = float(width) if width is not None else 5e-3
     if not (math.isfinite(w) and 0 < w < 1):
         raise ValueError(f"width: a relative width in (0, 1), got {width!r}")

@@ -26,10 +26,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from ..core.metrics import AbstractMetric, check_offered
 from ..core.precision import require_x64
 from ..core.solution import RESULTS, check
 from ..core.validate import as_int
-from ..drives.rv_khv import RVKHV, _response_jit
+from ..drives.rv_khv import RVKHV, RVPeakToPeak, _response_jit
 
 
 class AssemblyPhases(eqx.Module):
@@ -38,7 +39,7 @@ class AssemblyPhases(eqx.Module):
     - `teeth`: k of each planet (its position on the crank's spline, whole teeth from the reference).
     - `phase`: 2π k / z_g, rad (the value of the error source `planet_assembly`).
     - `start`, `value`: the metric (rad) at the starting positions and at the chosen ones.
-    - `metric`: its name; `rounds`: coordinate rounds taken; `evaluations`: units solved.
+    - `metric`: the metric minimised; `rounds`: coordinate rounds taken; `evaluations`: units solved.
     - `result`: `RESULTS.successful`, or `RESULTS.contact_not_converged` if a solve of the chosen
       or the starting positions failed.
     """
@@ -47,41 +48,40 @@ class AssemblyPhases(eqx.Module):
     phase: Float[Array, " N"]
     start: Float[Array, ""]
     value: Float[Array, ""]
-    metric: str = eqx.field(static=True)
+    metric: AbstractMetric
     rounds: int = eqx.field(static=True)
     evaluations: int = eqx.field(static=True)
     result: RESULTS
 
 
 @eqx.filter_jit
-def _candidates(drive: RVKHV, err: dict, planet: int, teeth: Array, metric: str):
+def _candidates(drive: RVKHV, err: dict, planet: int, teeth: Array, metric: AbstractMetric):
     """The metric and whether every solve succeeded, for planet `planet` at each of its z_g positions (the others as
     in `teeth`)."""
     zg = drive.z_planet
     base = 2 * math.pi * teeth.astype(float) / zg
     thetas = drive.output_angles()
-    fn = drive.metrics[metric]
 
     def one(k):
         e = dict(err, planet_assembly=base.at[planet].set(2 * math.pi * k / zg))
         r = _response_jit(drive, e, thetas)
-        return fn(drive, r), jnp.all(r.result == RESULTS.successful)
+        return metric(drive, r), jnp.all(r.result == RESULTS.successful)
 
     return jax.vmap(one)(jnp.arange(zg, dtype=float))
 
 
 @eqx.filter_jit
-def _evaluate(drive: RVKHV, err: dict, teeth: Array, metric: str):
+def _evaluate(drive: RVKHV, err: dict, teeth: Array, metric: AbstractMetric):
     e = dict(err, planet_assembly=2 * math.pi * teeth.astype(float) / drive.z_planet)
     r = _response_jit(drive, e, drive.output_angles())
-    return drive.metrics[metric](drive, r), jnp.all(r.result == RESULTS.successful)
+    return metric(drive, r), jnp.all(r.result == RESULTS.successful)
 
 
 def best_planet_assembly(
     drive: RVKHV,
     errors: Mapping[str, Any],
     *,
-    metric: str = "peak_to_peak",
+    metric: AbstractMetric = RVPeakToPeak(),
     start: Any = None,
     max_rounds: int = 4,
     throw: bool = True,
@@ -93,7 +93,8 @@ def best_planet_assembly(
     - `drive`: an `RVKHV`; its grid (`points`) is the one searched.
     - `errors`: the unit's errors (source name → value, as `RVKHV.response` takes them); `planet_assembly`, if
       given, is replaced by the search.
-    - `metric`: a name of `drive.metrics` (``"peak_to_peak"``, ``"peak_to_peak_reverse"``, ``"lost_motion"``).
+    - `metric`: one of the drive's metrics (`gearte.RVPeakToPeak()`, `gearte.RVPeakToPeakReverse()`,
+      `gearte.RVLostMotion()`).
     - `start`: the starting positions k (whole teeth, one per planet; default all 0).
     - `max_rounds`: the most coordinate rounds (each tries every position of every planet).
     - `throw`: raise if a solve at the start or the optimum failed (else see `result`).
@@ -103,8 +104,9 @@ def best_planet_assembly(
     require_x64()
     if not isinstance(drive, RVKHV):
         raise ValueError(f"drive: expected an RVKHV, got {type(drive).__name__}")
-    if metric not in drive.metrics:
-        raise ValueError(f"metric: {metric!r} is not one of the drive's metrics {sorted(drive.metrics)}")
+    if not isinstance(metric, AbstractMetric):
+        raise ValueError(f"metric: give a metric object such as gearte.RVPeakToPeak(), got {metric!r}")
+    check_offered(metric, drive)
     rounds_max = as_int("max_rounds", max_rounds, minimum=1)
     n, zg = drive.cranks, drive.z_planet
     teeth = np.zeros(n, dtype=int) if start is None else np.asarray(start, dtype=int).reshape(-1)

@@ -26,7 +26,7 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 from tqdm import tqdm
 
-from ..core.metrics import AbstractMetric
+from ..core.metrics import AbstractMetric, check_offered
 from ..core.precision import require_x64
 from ..core.programs import kept_program
 from ..core.schema import MAX_SAMPLES
@@ -79,8 +79,7 @@ class TEStudy(eqx.Module):
         for m in metric if isinstance(metric, tuple) else (metric,):
             if not isinstance(m, AbstractMetric):
                 raise ValueError(f"metric: expected a metric object such as gearte.Peak(), got {m!r}")
-            if m.name not in offered or type(offered[m.name]) is not type(m):
-                raise ValueError(f"metric: {type(drive).__name__} offers {list(offered)}, not {m.name!r}")
+            check_offered(m, drive)
         self.drive, self.errors, self.metric = drive, errors, metric
 
     def response(self, key: PRNGKeyArray):
