@@ -27,10 +27,13 @@ if TYPE_CHECKING:
     from .harmonic import HarmonicDrive as HarmonicDrive, HarmonicRunSettings as HarmonicRunSettings, HarmonicSource as HarmonicSource
     from .helical import DynamicResponse as DynamicResponse, HelicalPlanetary as HelicalPlanetary, load_helical as load_helical
     from .helical_drive import (
+        AbstractHelicalAnalysis as AbstractHelicalAnalysis,
+        Dynamic as Dynamic,
         HelicalErrorPeakToPeak as HelicalErrorPeakToPeak,
         HelicalPeakToPeak as HelicalPeakToPeak,
         HelicalPlanetaryDrive as HelicalPlanetaryDrive,
         HelicalResponse as HelicalResponse,
+        QuasiStatic as QuasiStatic,
     )
     from .helical_geometry import HelicalStage as HelicalStage
     from .helical_modifications import StageModifications as StageModifications, ToothModification as ToothModification
@@ -89,6 +92,9 @@ _LAZY = {
     "DynamicResponse": ".helical",
     "HelicalPlanetary": ".helical",
     "load_helical": ".helical",
+    "AbstractHelicalAnalysis": ".helical_drive",
+    "Dynamic": ".helical_drive",
+    "QuasiStatic": ".helical_drive",
     "HelicalErrorPeakToPeak": ".helical_drive",
     "HelicalPeakToPeak": ".helical_drive",
     "HelicalPlanetaryDrive": ".helical_drive",
