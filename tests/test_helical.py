@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 
 from gearte import AbstractStiffnessModel, MeanStiffness, SinglePairStiffness, SlicedStiffness, TransverseStiffness
 from gearte.core.signal import evaluate
+from gearte.core.solution import RESULTS
 from gearte.drives.helical import EXAMPLE, HelicalPlanetary, load_helical, wind_turbine_report
 from gearte.drives.helical_equations import MeshedSystem, contact_force, loa_errors, stage_system
 from gearte.drives.helical_geometry import geometry, iso6336_mesh_stiffness
@@ -381,6 +382,16 @@ def test_single_mesh_with_sinusoidal_error_is_the_damped_oscillator_closed_form(
     exact = LOAD + np.imag(q_amp * np.exp(1j * (w * np.asarray(sol.tau) + PHASE)))
     np.testing.assert_allclose(sol.q[:, 0], exact, atol=1e-7)
     assert abs(q_amp) > 1.1 * AMP  # amplified near resonance: the test sees the dynamics, not the static limit
+
+
+def test_a_solve_whose_state_turns_non_finite_says_so_in_its_result():
+    # The same compiled solve (the excitation's amplitude is an input): a finite state is `successful`, a NaN one
+    # (here a NaN error amplitude) `nonfinite`, with a NaN periodicity.
+    ok = _oscillator_solution(128)
+    assert ok.result == RESULTS.successful and math.isfinite(float(ok.periodicity))
+    bad_system = eqx.tree_at(lambda s: s.excitation.amplitude, _oscillator(), jnp.asarray(jnp.nan))
+    bad = eqx.filter_jit(solve_periodic)(bad_system, PeriodicSolver(10, steps_per_period=128, samples_per_period=32))
+    assert bad.result == RESULTS.nonfinite and math.isnan(float(bad.periodicity))
 
 
 def test_solution_converges_at_the_fifth_order_of_tsit5():

@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from gearte import cli
 from gearte.cli.config import load_study
 from gearte.core.signal import evaluate
+from gearte.core.solution import RESULTS
 from gearte.drives.helical_drive import Dynamic, HelicalPlanetaryDrive, QuasiStatic
 from gearte.drives.helical_geometry import geometry
 from gearte.drives.helical_stiffness import MeanStiffness
@@ -86,6 +87,7 @@ def test_quasi_static_is_the_direct_equilibrium_with_the_errors(stage, respond):
     np.testing.assert_allclose(y[:, 0], r.te[idx], rtol=0, atol=1e-10 * float(jnp.ptp(r.te)))
     np.testing.assert_allclose(y[:, 1:].T, r.dte[:, idx], rtol=0, atol=1e-9)  # µm
     assert float(jnp.ptp(r.te - r.te_nominal)) > 1e-6  # the errors matter (rad)
+    assert r.result == RESULTS.successful and bool(d.solved(r))
 
 
 def test_errors_te_with_constant_mesh_stiffness_is_the_kinematic_load_sharing_model(stage, respond):
@@ -154,7 +156,7 @@ def test_dynamic_analysis_with_constant_stiffness_is_the_quasi_static_one(stage,
     errors = _errors(_short(stage), 3)
     dyn = _short(stage, analysis=Dynamic(4 / 99, samples_per_mesh_period=8, settle_mesh_periods=19), stiffness_model=MeanStiffness())
     ry = respond(dyn, errors)
-    assert bool(dyn.solved(ry))
+    assert bool(dyn.solved(ry)) and ry.result == RESULTS.successful
     sys = dyn.system(errors)
     yq = _direct_jit(sys, jnp.asarray(dyn.mesh_times()), dyn._rows(sys))
     ptp = float(jnp.ptp(yq[:, 0]))

@@ -24,6 +24,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ..core.solution import RESULTS
 from ..core.units import ARCSEC_PER_RAD
 from ..core.validate import as_int
 from .helical_equations import SUN, StageSystem, error_sources, stage_system
@@ -54,7 +55,9 @@ class DynamicResponse(eqx.Module):
     - `output_te`: the sun's rotation minus the ratio times the carrier's, rad, (S,);
       `output_te_peak_to_peak`: its peak-to-peak, rad.
     - `spectrum`: amplitude of harmonics 0 … 15 of the window's fundamental in `dte`, µm, (2N, 16).
-    - `periodicity`: max change of the coordinates over the window, µm (≈ 0 at steady state).
+    - `periodicity`: max change of the coordinates over the window, µm (≈ 0 at steady state; NaN where the
+      solve failed).
+    - `result`: the solve's `RESULTS` (`PeriodicSolution.result`).
     """
 
     time: Float[Array, " s"]
@@ -65,6 +68,7 @@ class DynamicResponse(eqx.Module):
     output_te_peak_to_peak: Float[Array, ""]
     spectrum: Float[Array, "m h"]
     periodicity: Float[Array, ""]
+    result: RESULTS
 
 
 class HelicalPlanetary(eqx.Module):
@@ -155,6 +159,7 @@ class HelicalPlanetary(eqx.Module):
             output_te_peak_to_peak=peak_to_peak(te),
             spectrum=harmonics(dte, 16),
             periodicity=sol.periodicity,
+            result=sol.result,
         )
 
     def fluctuation(self, amounts: Float[Array, " 4"], *, smooth: float | None = None) -> Float[Array, " 2"]:

@@ -38,6 +38,7 @@ from jaxtyping import Array, Float
 from ..core.linalg import solve_spd
 from ..core.metrics import AbstractMetric, Quantity
 from ..core.precision import require_x64
+from ..core.solution import RESULTS
 from ..core.units import ARCSEC_PER_RAD
 from .helical_equations import CARRIER, SUN, StageSystem, error_sources, loa_errors, stage_system
 from .helical_geometry import HelicalStage
@@ -114,13 +115,16 @@ class HelicalResponse(eqx.Module):
     `te_nominal` (P,) rad, that of the error-free stage; `dte` (2N, P) µm, every mesh's DTE at mid face (sun–planet
     1 … N, then planet–ring 1 … N; > 0: the members approach); `compression` (2N, P) µm, the DTE plus the errors'
     excitation: the mid-face compression of every mesh (< 0: the mesh opens at mid face); `periodicity` µm (the dynamic analysis: the
-    coordinates' largest change over the window, NaN where a solve failed; 0 for the quasi-static one)."""
+    coordinates' largest change over the window, NaN where a solve failed; 0 for the quasi-static one); `result`:
+    `RESULTS.successful`, or the dynamic solve's failure (`PeriodicSolution.result`; for the quasi-static analysis
+    `RESULTS.nonfinite` where the TE is not finite)."""
 
     te: Float[Array, " p"]
     te_nominal: Float[Array, " p"]
     dte: Float[Array, "m p"]
     compression: Float[Array, "m p"]
     periodicity: Float[Array, ""]
+    result: RESULTS
 
 
 class HelicalPeakToPeak(AbstractMetric):
@@ -337,7 +341,11 @@ class HelicalPlanetaryDrive(AbstractGridDrive):
         y = nominal + basis_y @ c
         e = jnp.einsum("jpm,j->mp", basis_e, c)
         dte = y[:, 1:].T
-        return HelicalResponse(te=y[:, 0], te_nominal=nominal[:, 0], dte=dte, compression=dte + e, periodicity=jnp.asarray(0.0))
+        finite = jnp.all(jnp.isfinite(y))
+        result = RESULTS.where(finite, RESULTS.successful, RESULTS.nonfinite)  # pyright: ignore[reportArgumentType]
+        return HelicalResponse(
+            te=y[:, 0], te_nominal=nominal[:, 0], dte=dte, compression=dte + e, periodicity=jnp.asarray(0.0), result=result
+        )
 
     def _dynamic(self, errors: Mapping[str, Any]) -> HelicalResponse:
         from .helical_solve import PeriodicSolver, solve_periodic
@@ -355,14 +363,16 @@ class HelicalPlanetaryDrive(AbstractGridDrive):
         def solve(err):
             sys = self.system(err)
             sol = solve_periodic(sys.system, solver)
-            return sol.q @ self._rows(sys).T, sol.periodicity, sys
+            return sol.q @ self._rows(sys).T, sol, sys
 
-        y, per, sys = solve(errors)
+        y, sol, sys = solve(errors)
         y0, _, _ = solve(None)
         taus = jnp.asarray(self.mesh_times())
         e = jax.vmap(loa_errors(self.stage, sys.geometry, errors))(taus).T
         dte = y[:, 1:].T
-        return HelicalResponse(te=y[:, 0], te_nominal=y0[:, 0], dte=dte, compression=dte + e, periodicity=per)
+        return HelicalResponse(
+            te=y[:, 0], te_nominal=y0[:, 0], dte=dte, compression=dte + e, periodicity=sol.periodicity, result=sol.result
+        )
 
     def te(self, response: HelicalResponse) -> Float[Array, " p"]:
         return response.te
@@ -373,7 +383,7 @@ class HelicalPlanetaryDrive(AbstractGridDrive):
         return Trace.of_grid(np.asarray(self.input_angles()), np.asarray(r.te), str(self.window_turns()))
 
     def solved(self, response: HelicalResponse) -> Array:
-        return jnp.isfinite(response.periodicity)
+        return response.result == RESULTS.successful
 
     def sample_outputs(self, errors, response: HelicalResponse) -> dict[str, Array]:
         """Per sample: the errors' TE p-p (rad), the largest DTE fluctuation of a mesh and the smallest mid-face DTE

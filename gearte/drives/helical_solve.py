@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..core.solution import RESULTS
 from ..core.validate import as_int
 from .helical_equations import MeshedSystem
 
@@ -136,12 +137,15 @@ class PeriodicSolver(eqx.Module):
 
 class PeriodicSolution(eqx.Module):
     """States over the kept window: `tau` (S,) mesh periods from its start, `q` (S, D) µm, `v` (S, D)
-    µm per mesh period, and `periodicity`: max |q(end) − q(start)| of the window, µm."""
+    µm per mesh period, `periodicity`: max |q(end) − q(start)| of the window, µm (NaN where the solve failed), and
+    `result`: `RESULTS.successful`, `RESULTS.max_steps_reached` (diffrax stopped) or `RESULTS.nonfinite` (the state
+    became NaN or infinite: too few steps per mesh period for the stage's stiffness)."""
 
     tau: Float[Array, " s"]
     q: Float[Array, "s d"]
     v: Float[Array, "s d"]
     periodicity: Float[Array, ""]
+    result: RESULTS
 
 
 def solve_periodic(system: MeshedSystem, solver: PeriodicSolver, *, y0: Float[Array, " n"] | None = None) -> PeriodicSolution:
@@ -181,8 +185,10 @@ def solve_periodic(system: MeshedSystem, solver: PeriodicSolver, *, y0: Float[Ar
     ys = jax.vmap(window.evaluate)(jnp.asarray(ts))
     ok = (settle.result == diffrax.RESULTS.successful) & (window.result == diffrax.RESULTS.successful)
     q, v = ys[:, :d], ys[:, d:]
-    periodicity = jnp.where(ok, jnp.max(jnp.abs(q[-1] - q[0])), jnp.nan)
-    return PeriodicSolution(jnp.asarray(ts[:-1] - t_start), q[:-1], v[:-1], periodicity)
+    finite = jnp.all(jnp.isfinite(ys))
+    periodicity = jnp.where(ok & finite, jnp.max(jnp.abs(q[-1] - q[0])), jnp.nan)
+    result = RESULTS.where(ok, RESULTS.where(finite, RESULTS.successful, RESULTS.nonfinite), RESULTS.max_steps_reached)  # pyright: ignore[reportArgumentType]
+    return PeriodicSolution(jnp.asarray(ts[:-1] - t_start), q[:-1], v[:-1], periodicity, result)
 
 
 def peak_to_peak(x: Float[Array, "*b s"], axis: int = -1) -> Float[Array, "*b"]:
