@@ -1,0 +1,53 @@
+"""Checks at the public boundary: each refuses an invalid argument with a message naming it, and still accepts a valid one."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gearte
+from gearte import budget_problem
+from gearte.drives import ExplicitDrive, ExplicitTerm
+from gearte.identification import MeasuredRecord, RecordError
+
+GAIN = 1e-5
+
+
+def explicit_drive():
+    return ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 3)], gain=GAIN)
+
+
+def small_problem(**kw):
+    d = explicit_drive()
+    law = lambda t: gearte.Rayleigh(t / 2, truncate_at=t)
+    model = gearte.ErrorModel(
+        {"a": gearte.ErrorSource(law(10.0), gearte.UniformPhase()), "b": gearte.ErrorSource(law(10.0), gearte.UniformPhase())},
+        d.error_sources,
+    )
+    costs = {"a": gearte.Reciprocal(0.0, 10.0), "b": gearte.Reciprocal(0.0, 40.0)}
+    return budget_problem(d, model, costs=costs, nominal={"a": 10.0, "b": 10.0}, spec=20 * GAIN, statistic=gearte.Yield(0.99), **kw)
+
+
+# 1. MeasuredRecord
+
+
+def test_measured_record_refuses_mismatched_lengths_and_non_finite_values():
+    theta = np.linspace(0.0, 2 * math.pi, 32, endpoint=False)
+    te = 1e-5 * np.sin(theta)
+    with pytest.raises(RecordError, match=r"bench\.csv: theta has 32 samples but te has 31: give one TE value per input angle"):
+        MeasuredRecord(theta, te[:-1], source="bench.csv")
+    bad = te.copy()
+    bad[4] = np.nan
+    with pytest.raises(RecordError, match=r"record: te, data row 5: not a finite number"):
+        MeasuredRecord(theta, bad)
+    with pytest.raises(RecordError, match=r"theta, data row 1: not a finite number"):
+        MeasuredRecord(np.where(theta == 0.0, np.inf, theta), te)
+    with pytest.raises(RecordError, match=r"te must be 1-D .* got shape \(32, 1\)"):
+        MeasuredRecord(theta, te[:, None])
+    r = MeasuredRecord(theta, te, input_rpm=60.0)
+    assert r.points_per_rev == pytest.approx(32.0)
+    # Under jit the fields are traced and pass unchecked.
+    out = jax.jit(lambda t, v: MeasuredRecord(t, v).te * 2)(jnp.asarray(theta), jnp.asarray(te))
+    np.testing.assert_allclose(out, 2 * te)
