@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import gearte
-from gearte import budget_problem
+from gearte import budget_problem, contributions, pareto_front
 from gearte.drives import ExplicitDrive, ExplicitTerm
 from gearte.identification import MeasuredRecord, RecordError
 
@@ -51,3 +51,38 @@ def test_measured_record_refuses_mismatched_lengths_and_non_finite_values():
     # Under jit the fields are traced and pass unchecked.
     out = jax.jit(lambda t, v: MeasuredRecord(t, v).te * 2)(jnp.asarray(theta), jnp.asarray(te))
     np.testing.assert_allclose(out, 2 * te)
+
+
+# 2. contributions
+
+
+def test_contributions_checks_n_samples_and_tolerances():
+    p = small_problem()
+    t = {"a": 4.0, "b": 7.0}
+    with pytest.raises(ValueError, match=r"n_samples: must be ≥ 1, got 0"):
+        contributions(p, t, key=1, n_samples=0)
+    with pytest.raises(ValueError, match=r"n_samples: must be ≥ 1, got -5"):
+        contributions(p, t, key=1, n_samples=-5)
+    with pytest.raises(ValueError, match=r"tolerances\['a'\]: a tolerance must be finite and > 0 µm, got -4\.0"):
+        contributions(p, {"a": -4.0, "b": 7.0}, key=1, n_samples=64)
+    with pytest.raises(ValueError, match=r"tolerances: give one tolerance \(µm\) per error source \['a', 'b'\]; missing \['b'\]"):
+        contributions(p, {"a": 4.0}, key=1, n_samples=64)
+    c = contributions(p, t, key=1, n_samples=64)
+    assert set(c) == {"a", "b"} and all(math.isfinite(v) and v > 0 for v in c.values())
+
+
+# 3. pareto_front
+
+
+def test_pareto_front_checks_each_spec_and_throws_when_asked():
+    p = small_problem()
+    with pytest.raises(ValueError, match=r"pareto_front: specs\[1\]: Constraint\.spec: the specification of peak must be > 0, got -1\.0"):
+        pareto_front(p, [20 * GAIN, -1.0], key=0, n_samples=64, n_check=1000)
+    with pytest.raises(ValueError, match=r"pareto_front: specs\[0\]: .*got nan"):
+        pareto_front(p, [math.nan], key=0, n_samples=64, n_check=1000)
+    # A spec the minimum tolerances cannot meet: reported by default (the current behaviour), raised with throw=True.
+    tight = small_problem(minimum={"a": 5.0, "b": 5.0})
+    (r,) = pareto_front(tight, [1 * GAIN], key=0, n_samples=256, n_check=1000)
+    assert r.result == gearte.RESULTS.infeasible and math.isnan(r.cost)
+    with pytest.raises(RuntimeError, match=r"optimise_budget: even at the tolerances .*cannot be met.*pass throw=False"):
+        pareto_front(tight, [1 * GAIN], key=0, n_samples=256, n_check=1000, throw=True)
