@@ -1,6 +1,7 @@
 """Checks at the public boundary: each refuses an invalid argument with a message naming it, and still accepts a valid one."""
 
 import math
+import types
 
 import jax
 import jax.numpy as jnp
@@ -10,7 +11,8 @@ import pytest
 import gearte
 from gearte import budget_problem, contributions, pareto_front
 from gearte.drives import ExplicitDrive, ExplicitTerm
-from gearte.identification import MeasuredRecord, RecordError
+from gearte.identification import MeasuredRecord, RecordError, reassemble
+from gearte.identification import assembly as assembly_mod
 
 GAIN = 1e-5
 
@@ -86,3 +88,20 @@ def test_pareto_front_checks_each_spec_and_throws_when_asked():
     assert r.result == gearte.RESULTS.infeasible and math.isnan(r.cost)
     with pytest.raises(RuntimeError, match=r"optimise_budget: even at the tolerances .*cannot be met.*pass throw=False"):
         pareto_front(tight, [1 * GAIN], key=0, n_samples=256, n_check=1000, throw=True)
+
+
+# 4. reassemble
+
+
+def test_reassemble_passes_throw_to_allocate_measured(monkeypatch):
+    d = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 1)], gain=GAIN)  # two lines at one frequency: they cancel
+    errs = {"a": gearte.Eccentricity(5.0, 0.3), "b": gearte.Eccentricity(3.0, 0.3)}
+    sol = types.SimpleNamespace(groups=(), errors=errs)
+    r = reassemble(d, sol, adjust={"b": None}, starts=2)  # pyright: ignore[reportArgumentType]
+    np.testing.assert_allclose(float(r.te), 2.0 * GAIN, rtol=1e-6)  # |A1 − A2|
+    seen = []
+    real = assembly_mod.allocate_measured
+    monkeypatch.setattr(assembly_mod, "allocate_measured", lambda *a, **kw: seen.append(kw["throw"]) or real(*a, **kw))
+    reassemble(d, sol, adjust={"b": None}, starts=2)  # pyright: ignore[reportArgumentType]
+    reassemble(d, sol, adjust={"b": None}, starts=2, throw=False)  # pyright: ignore[reportArgumentType]
+    assert seen == [True, False]
