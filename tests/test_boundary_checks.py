@@ -105,3 +105,22 @@ def test_reassemble_passes_throw_to_allocate_measured(monkeypatch):
     reassemble(d, sol, adjust={"b": None}, starts=2)  # pyright: ignore[reportArgumentType]
     reassemble(d, sol, adjust={"b": None}, starts=2, throw=False)  # pyright: ignore[reportArgumentType]
     assert seen == [True, False]
+
+
+# 5. pathwise_sensitivities
+
+
+def test_pathwise_sensitivities_refuses_a_chunk_below_one():
+    d = explicit_drive()
+    model = gearte.ErrorModel(
+        {
+            "a": gearte.ErrorSource(gearte.Rayleigh(5.0), gearte.UniformPhase()),
+            "b": gearte.ErrorSource(gearte.Rayleigh(5.0), gearte.UniformPhase()),
+        },
+        d.error_sources,
+    )
+    for bad in (0, -3):
+        with pytest.raises(ValueError, match=rf"chunk: must be ≥ 1, got {bad}"):
+            gearte.pathwise_sensitivities(d, model, gearte.Peak(), key=0, n_samples=2, chunk=bad)
+    out = gearte.pathwise_sensitivities(d, model, gearte.Peak(), key=0, n_samples=2, chunk=1)
+    assert math.isfinite(out["peak"].mean) and out["peak"].n_samples == 2
