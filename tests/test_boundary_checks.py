@@ -144,3 +144,17 @@ def test_smooth_quantile_checks_level_width_and_shape():
     # Traced level and width pass unchecked (no concretisation error), and give the same value.
     traced = jax.jit(lambda v, lv, w: smooth_quantile(v, lv, w))(x, 0.9, 1e-4)
     np.testing.assert_allclose(float(traced), q, rtol=1e-12)
+
+
+# 7. Eccentricity
+
+
+def test_eccentricity_refuses_shapes_that_do_not_broadcast():
+    with pytest.raises(ValueError, match=r"Eccentricity: magnitude of shape \(2,\) and phase of shape \(3,\) do not broadcast"):
+        gearte.Eccentricity([1.0, 2.0], [0.0, 1.0, 2.0])
+    with pytest.raises(ValueError, match=r"do not broadcast"):
+        jax.jit(lambda m, p: gearte.Eccentricity(m, p).magnitude)(jnp.ones(2), jnp.zeros(3))
+    e = gearte.Eccentricity([1.0, 2.0], [0.0, 1.0])
+    assert e.magnitude.shape == e.phase.shape == (2,)
+    assert gearte.Eccentricity([1.0, 2.0], 0.5).phase.shape == ()
+    assert gearte.Eccentricity(1.0, [0.0, 1.0, 2.0]).phase.shape == (3,)
