@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import gearte
-from gearte import budget_problem, contributions, pareto_front, smooth_quantile
+from gearte import budget_problem, contributions, extrema, pareto_front, smooth_quantile
+from gearte.core.twoscale import extrema_two_scale
 from gearte.drives import ExplicitDrive, ExplicitTerm
 from gearte.identification import MeasuredRecord, RecordError, reassemble
 from gearte.identification import assembly as assembly_mod
@@ -158,3 +159,18 @@ def test_eccentricity_refuses_shapes_that_do_not_broadcast():
     assert e.magnitude.shape == e.phase.shape == (2,)
     assert gearte.Eccentricity([1.0, 2.0], 0.5).phase.shape == ()
     assert gearte.Eccentricity(1.0, [0.0, 1.0, 2.0]).phase.shape == (3,)
+
+
+# 8. extrema
+
+
+def test_extrema_refuses_negative_newton_steps():
+    d = explicit_drive()
+    sig = d.signal({"a": gearte.Eccentricity(5.0, 0.3), "b": gearte.Eccentricity(3.0, 1.0)})
+    with pytest.raises(ValueError, match=r"extrema: newton_steps: must be ≥ 0, got -1"):
+        extrema(sig, newton_steps=-1)
+    with pytest.raises(ValueError, match=r"extrema_two_scale: newton_steps: must be ≥ 0, got -2"):
+        extrema_two_scale(sig, newton_steps=-2)
+    e0, e1 = extrema(sig, newton_steps=0), extrema(sig, newton_steps=1)
+    assert float(e0.max) <= float(e1.max) + 1e-15
+    assert float(extrema_two_scale(sig, newton_steps=0).max) <= float(e1.max) + 1e-15
