@@ -174,3 +174,16 @@ def test_extrema_refuses_negative_newton_steps():
     e0, e1 = extrema(sig, newton_steps=0), extrema(sig, newton_steps=1)
     assert float(e0.max) <= float(e1.max) + 1e-15
     assert float(extrema_two_scale(sig, newton_steps=0).max) <= float(e1.max) + 1e-15
+
+
+# 9. Optimised
+
+
+def test_optimised_checks_to_as_relative_phase_does():
+    for bad in (1, ""):
+        with pytest.raises(ValueError, match=r"RelativePhase\.to: name the error source"):
+            gearte.RelativePhase(bad)  # pyright: ignore[reportArgumentType]
+        with pytest.raises(ValueError, match=r"Optimised\.to: name the error source whose phase this one follows"):
+            gearte.Optimised(bad)  # pyright: ignore[reportArgumentType]
+    assert gearte.Optimised().to is None and gearte.Optimised(None).reference is None
+    assert gearte.Optimised("sun").reference == "sun"
