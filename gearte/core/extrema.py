@@ -25,6 +25,7 @@ from jaxtyping import Array, Float
 
 from .signal import TESignal, evaluate
 from .units import TWO_PI as _TWO_PI
+from .validate import as_int
 
 
 class Extrema(eqx.Module):
@@ -308,7 +309,7 @@ def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 2, newt
     - `signal`: the TE (rad); any batch shape.
     - `oversample`: grid points per period of the highest order (≥ 8).
     - `candidates`: grid maxima refined by Newton's method.
-    - `newton_steps`: Newton iterations per candidate.
+    - `newton_steps`: Newton iterations per candidate (≥ 0; 0 keeps the grid's parabolic estimate).
 
     **Returns:** an `Extrema` (rad; input angles in rad).
     """
@@ -316,6 +317,7 @@ def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 2, newt
         raise ValueError(f"extrema: oversample must be ≥ 8 (got {oversample}); the candidate ranking needs it")
     if candidates < 1:
         raise ValueError(f"extrema: candidates must be ≥ 1 (got {candidates})")
+    newton_steps = as_int("extrema: newton_steps", newton_steps, minimum=0)
     f0 = float(signal.fundamental)
     if not signal.orders:
         zero = jnp.zeros_like(signal.offset)

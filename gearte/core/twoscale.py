@@ -35,6 +35,7 @@ from jaxtyping import Array, Float
 from .extrema import _basis, _candidates, _derivatives, _grid_values, extrema, grid_size
 from .signal import TESignal, evaluate
 from .units import TWO_PI as _TWO_PI
+from .validate import as_int
 
 
 class TwoScaleExtrema(eqx.Module):
@@ -138,6 +139,7 @@ def extrema_two_scale(signal: TESignal, *, fast_order: int | None = None, candid
     """
     if candidates < 1:
         raise ValueError(f"extrema_two_scale: candidates must be ≥ 1 (got {candidates})")
+    newton_steps = as_int("extrema_two_scale: newton_steps", newton_steps, minimum=0)
     if not signal.orders:
         zero = jnp.zeros_like(signal.offset)
         return TwoScaleExtrema(signal.offset, signal.offset, zero, zero, zero, zero)

@@ -46,6 +46,8 @@ class Eccentricity(eqx.Module):
 
     Values given as Python numbers, lists or NumPy arrays are checked: a magnitude must be
     finite and ≥ 0, a phase finite. (JAX arrays, e.g. drawn inside a study, are taken as they are.)
+    The two shapes must broadcast together (the same shape, or one a scalar: one phase for every instance), for
+    any values (a shape is known even inside `jit`).
     """
 
     magnitude: Float[Array, "*n"]
@@ -54,6 +56,14 @@ class Eccentricity(eqx.Module):
     def __init__(self, magnitude: ArrayLike, phase: ArrayLike = 0.0):
         check_array_values("Eccentricity.magnitude", magnitude, nonnegative=True, unit="µm")
         check_array_values("Eccentricity.phase", phase, unit="rad")
+        m_shape, p_shape = np.shape(magnitude), np.shape(phase)
+        try:
+            np.broadcast_shapes(m_shape, p_shape)
+        except ValueError:
+            raise ValueError(
+                f"Eccentricity: magnitude of shape {m_shape} and phase of shape {p_shape} do not broadcast together; give one "
+                "phase per magnitude (the same shape), or a single phase for all"
+            ) from None
         self.magnitude = jnp.asarray(magnitude, dtype=float)
         self.phase = jnp.asarray(phase, dtype=float)
 

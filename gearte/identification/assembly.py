@@ -52,10 +52,12 @@ def reassemble(
     key=0,
     metric: AbstractMetric = Peak(),
     starts: int = 16,
+    throw: bool = True,
 ) -> MeasuredAllocation:
     """The turns of the `adjust` sources (source → step between allowed positions, rad, or None) that minimise the
     TE of the drive with its identified errors (`gearte.allocate_measured`); `te_before` is the identified TE as
-    assembled, `te` the predicted TE after re-assembly."""
+    assembled, `te` the predicted TE after re-assembly. `throw`: raise if the best start did not converge (else check
+    the result's `result`), as for `gearte.allocate_measured`."""
     combined = {m.split("[")[0]: g for g in solution.groups if g.kind == "combined" for m in g.members}
     for name in adjust:
         if name in combined:
@@ -64,7 +66,7 @@ def reassemble(
                 f"adjust: {name!r} shares its line with {', '.join(m for m in g.members if m.split('[')[0] != name)}; the record gives "
                 f"only their combined phasor, so turning {name} alone cannot be predicted. {g.advice}"
             )
-    return allocate_measured(drive, solution.errors, adjust=adjust, key=key, metric=metric, starts=starts)
+    return allocate_measured(drive, solution.errors, adjust=adjust, key=key, metric=metric, starts=starts, throw=throw)
 
 
 @dataclasses.dataclass(frozen=True)

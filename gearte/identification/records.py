@@ -37,6 +37,7 @@ from jaxtyping import PRNGKeyArray
 from ..core.records import Record
 from ..core.signal import evaluate
 from ..core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD, TWO_PI
+from ..core.validate import is_traced
 from ..drives.protocol import AbstractGridDrive, AbstractSinusoidalDrive, Eccentricity, Errors
 from ..studies.montecarlo import as_key
 
@@ -67,6 +68,21 @@ class MeasuredRecord(eqx.Module):
     input_rpm: float | None = eqx.field(static=True, default=None)
     source: str = eqx.field(static=True, default="record")
 
+    def __check_init__(self):
+        if is_traced(self.theta) or is_traced(self.te):
+            return
+        shapes = {k: np.shape(v) for k, v in (("theta", self.theta), ("te", self.te))}
+        for k, shp in shapes.items():
+            if len(shp) != 1:
+                _fail(self.source, f"{k} must be 1-D (one value per sample), got shape {shp}")
+        if shapes["theta"] != shapes["te"]:
+            _fail(
+                self.source,
+                f"theta has {shapes['theta'][0]} samples but te has {shapes['te'][0]}: give one TE value per input angle",
+            )
+        for k in ("theta", "te"):
+            _check_finite(k, np.asarray(getattr(self, k), dtype=np.float64), self.source)
+
     @property
     def revolutions(self) -> float:
         """Input revolutions the record spans (samples × step / 2π)."""
@@ -92,6 +108,13 @@ class MeasuredRecord(eqx.Module):
 
 def _fail(source: str, msg: str) -> NoReturn:
     raise RecordError(f"{source}: {msg}")
+
+
+def _check_finite(what: str, values: np.ndarray, source: str) -> None:
+    """Raise `RecordError` at the first value of `what` (a column, or a `MeasuredRecord` field) that is not finite."""
+    bad = np.nonzero(~np.isfinite(values))[0]
+    if bad.size:
+        _fail(source, f"{what}, data row {bad[0] + 1}: not a finite number; drop or repair the row")
 
 
 def _column(name: str, source: str, units: Mapping[str, str]) -> tuple[str, float] | None:
@@ -218,9 +241,7 @@ def record_from_columns(
         if q[0] in cols:
             _fail(source, f"two {q[0]} columns")
         v = np.asarray(data[:, j], dtype=np.float64) * q[1]
-        bad = np.nonzero(~np.isfinite(v))[0]
-        if bad.size:
-            _fail(source, f"column {name!r}, data row {bad[0] + 1}: not a finite number")
+        _check_finite(f"column {name!r}", v, source)
         cols[q[0]] = v
     rpm = None if input_rpm is None else float(input_rpm)
     if rpm is not None and not (math.isfinite(rpm) and rpm > 0):

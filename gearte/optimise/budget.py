@@ -50,6 +50,7 @@ from tqdm import tqdm
 
 from ..core.precision import require_x64
 from ..core.solution import RESULTS, check
+from ..core.validate import as_int
 from ..studies.montecarlo import as_key
 from .budget_model import (
     BudgetProblem,
@@ -57,6 +58,7 @@ from .budget_model import (
     _Draws,
     _missed,
     _violation,
+    check_tolerances,
     common_draws,
     metric_samples,
     statistic,
@@ -413,22 +415,38 @@ def contributions(p: BudgetProblem, tolerances: Mapping[str, float], *, key: int
     """Gradient contributions ∂statistic/∂T_i · T_i of the first constraint at these tolerances (rad for angles).
 
     For a homogeneous problem (a linear drive's peak) the contributions add up to the
-    statistic itself by Euler's theorem: each is the share of the TE a source owns.
+    statistic itself by Euler's theorem: each is the share of the TE a source owns. `tolerances`: one value > 0 per
+    budgeted source; `n_samples` ≥ 1.
     """
+    tol = check_tolerances(p, tolerances)
+    n_samples = as_int("n_samples", n_samples, minimum=1)
     draws = common_draws(p, as_key(key), n_samples)
-    t = {n: jnp.asarray(float(tolerances[n])) for n in p.names}
+    t = {n: jnp.asarray(tol[n]) for n in p.names}
     c0 = p.constraints[0]
     g = _statistic_grad_jit(p, t, draws, c0)
     return {n: float(g[n] * t[n]) for n in p.names}
 
 
 def pareto_front(
-    p: BudgetProblem, specs, *, key: int | PRNGKeyArray, n_samples: int = 4096, n_check: int = 50_000, progress: bool | None = None
+    p: BudgetProblem,
+    specs,
+    *,
+    key: int | PRNGKeyArray,
+    n_samples: int = 4096,
+    n_check: int = 50_000,
+    throw: bool = False,
+    progress: bool | None = None,
 ) -> list[BudgetResult]:
     """Optimised budgets for each spec of the first constraint in `specs` (rad for angles): the cost-vs-spec front
-    (`progress` as for `optimise_budget`)."""
-    out = []
-    for s in specs:
-        q = eqx.tree_at(lambda b: b.constraints[0].spec, p, jnp.asarray(float(s)))
-        out.append(optimise_budget(q, key=key, n_samples=n_samples, n_check=n_check, throw=False, progress=progress))
-    return out
+    (`progress` as for `optimise_budget`). Each spec is checked as `Constraint` checks it (> 0) before any is solved.
+    `throw`: raise at the first spec that cannot be met or whose optimiser fails, as `optimise_budget(throw=True)`
+    does (default False: such a point comes back with its `result` set, and the front goes on)."""
+    c0 = p.constraints[0]
+    problems = []
+    for i, s in enumerate(specs):
+        try:
+            c = Constraint(c0.metric, s, c0.statistic)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"pareto_front: specs[{i}]: {e}") from None
+        problems.append(eqx.tree_at(lambda b: b.constraints, p, (c, *p.constraints[1:])))
+    return [optimise_budget(q, key=key, n_samples=n_samples, n_check=n_check, throw=throw, progress=progress) for q in problems]

@@ -178,6 +178,33 @@ def budget_problem(
     )
 
 
+def check_tolerances(p: BudgetProblem, tolerances) -> dict[str, float]:
+    """`tolerances` (µm, or rad for angles; None: the nominal ones) as one finite float > 0 per budgeted source of `p`;
+    raises ValueError naming the missing, unknown or invalid entry."""
+    if tolerances is None:
+        return {n: float(p.nominal[n]) for n in p.names}
+    if not isinstance(tolerances, Mapping):
+        raise ValueError(f"tolerances: a mapping source → tolerance (µm), got {type(tolerances).__name__}")
+    missing = [n for n in p.names if n not in tolerances]
+    extra = [n for n in tolerances if n not in p.names]
+    if missing or extra:
+        raise ValueError(
+            f"tolerances: give one tolerance (µm) per error source {p.names}"
+            + (f"; missing {missing}" if missing else "")
+            + (f"; unknown {extra}" if extra else "")
+        )
+    out = {}
+    for n in p.names:
+        try:
+            t = float(tolerances[n])
+        except (TypeError, ValueError):
+            raise ValueError(f"tolerances[{n!r}]: expected a number (µm), got {tolerances[n]!r}") from None
+        if not (math.isfinite(t) and t > 0):
+            raise ValueError(f"tolerances[{n!r}]: a tolerance must be finite and > 0 µm, got {tolerances[n]!r}")
+        out[n] = t
+    return out
+
+
 class _Draws(eqx.Module):
     """Common random numbers: the errors at the nominal tolerances, with the budgeted values as standard draws u."""
 

@@ -13,7 +13,7 @@ from ..core.units import UNIT_SYMBOLS, angle_from_rad
 from ..studies.montecarlo import TEStudy, as_key
 from ..studies.sensitivity import SobolIndices, sobol_indices
 from .budget import contributions
-from .budget_model import BudgetProblem
+from .budget_model import BudgetProblem, check_tolerances
 
 
 class SensitivityTable(eqx.Module):
@@ -99,7 +99,7 @@ def sensitivity_table(
     """
     if not isinstance(problem, BudgetProblem):
         raise ValueError(f"problem: expected a budget problem (gearte.budget_problem), got {type(problem).__name__}")
-    tol = _check_tolerances(problem, tolerances)
+    tol = check_tolerances(problem, tolerances)
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 2:
         raise ValueError(f"n_samples: must be a whole number ≥ 2, got {n_samples!r}")
     k_grad, k_sobol = jax.random.split(as_key(key))
@@ -108,28 +108,3 @@ def sensitivity_table(
     study = TEStudy(problem.drive, problem.model, metric=problem.constraints[0].metric)
     sob = sobol_indices(study, key=k_sobol, n=n_sobol, scale=scale)
     return SensitivityTable(tolerances=tol, contribution=contrib, statistic=float(sum(contrib.values())), sobol=sob)
-
-
-def _check_tolerances(p: BudgetProblem, tolerances) -> dict[str, float]:
-    if tolerances is None:
-        return {n: float(p.nominal[n]) for n in p.names}
-    if not isinstance(tolerances, Mapping):
-        raise ValueError(f"tolerances: a mapping source → tolerance (µm), got {type(tolerances).__name__}")
-    missing = [n for n in p.names if n not in tolerances]
-    extra = [n for n in tolerances if n not in p.names]
-    if missing or extra:
-        raise ValueError(
-            f"tolerances: give one tolerance (µm) per error source {p.names}"
-            + (f"; missing {missing}" if missing else "")
-            + (f"; unknown {extra}" if extra else "")
-        )
-    out = {}
-    for n in p.names:
-        try:
-            t = float(tolerances[n])
-        except (TypeError, ValueError):
-            raise ValueError(f"tolerances[{n!r}]: expected a number (µm), got {tolerances[n]!r}") from None
-        if not (np.isfinite(t) and t > 0):
-            raise ValueError(f"tolerances[{n!r}]: a tolerance must be finite and > 0 µm, got {tolerances[n]!r}")
-        out[n] = t
-    return out

@@ -16,14 +16,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..core.validate import is_traced
+
 
 def smooth_quantile(x: Float[Array, " n"], level: float, width, *, iterations: int = 64) -> Float[Array, ""]:
     """Kernel-smoothed `level`-quantile of samples `x`: the q with mean σ((q − x_k)/width) = level.
 
     Differentiable in `x` and in `width` (which may depend on `x`) by the implicit-function
     theorem: dq = Σ_k σ'_k [dx_k + (q − x_k) dw / w] / Σ_k σ'_k. As width → 0 it tends to the
-    empirical quantile.
+    empirical quantile. `x` is 1-D, `level` in (0, 1), `width` > 0 (checked where they are not traced).
     """
+    _check_quantile_args(x, level, width)
     xs = jax.lax.stop_gradient(x)
     width = jnp.asarray(width, dtype=float)
     ws = jax.lax.stop_gradient(width)
@@ -43,6 +46,20 @@ def smooth_quantile(x: Float[Array, " n"], level: float, width, *, iterations: i
     wk = s * (1 - s)
     wk = wk / jnp.sum(wk)
     return q + jnp.sum(wk * (x - xs)) + jnp.sum(wk * (q - xs)) / ws * (width - ws)
+
+
+def _check_quantile_args(x, level, width) -> None:
+    """`smooth_quantile`'s arguments, where they are concrete (a traced value passes unchecked; a shape is always known)."""
+    if np.ndim(x) != 1:
+        raise ValueError(f"smooth_quantile: x must be 1-D (one value per sample), got shape {np.shape(x)}; flatten it or pass one row")
+    if not is_traced(level):
+        lv = float(level)
+        if not 0 < lv < 1:
+            raise ValueError(f"smooth_quantile: level must be in (0, 1) (e.g. 0.9973 for 99.73 %), got {level!r}")
+    if not is_traced(width):
+        w = np.asarray(width, dtype=float)
+        if not (np.all(np.isfinite(w)) and np.all(w > 0)):
+            raise ValueError(f"smooth_quantile: width must be finite and > 0 (the same unit as x, e.g. 0.005 × its mean), got {width!r}")
 
 
 class AbstractStatistic(eqx.Module):

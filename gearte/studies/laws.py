@@ -371,6 +371,11 @@ class Optimised(AbstractRule):
     to: str | None = eqx.field(static=True)
 
     def __init__(self, to: str | None = None):
+        if to is not None and (not isinstance(to, str) or not to):
+            raise ValueError(
+                f"Optimised.to: name the error source whose phase this one follows, or leave it out (None) for an "
+                f"absolute phase; got {to!r}"
+            )
         self.to = to
 
     @property

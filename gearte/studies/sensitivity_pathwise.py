@@ -27,6 +27,7 @@ from jaxtyping import PRNGKeyArray
 from ..core.metrics import AbstractMetric
 from ..core.precision import require_x64
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
+from ..core.validate import as_int
 from ..drives.protocol import AbstractDrive
 from .errors import ErrorModel
 from .laws import Uniform
@@ -65,7 +66,8 @@ def pathwise_sensitivities(
     - `metrics`: one metric object of the drive, or several (computed together).
     - `key`: the study's seed or key; sample i uses ``fold_in(key, i)``.
     - `n_samples`: samples in the mean (their gradients are averaged).
-    - `chunk`: samples computed together (vectorised); every chunk has the same shape, so one compilation.
+    - `chunk`: samples computed together (vectorised; ≥ 1, at most `n_samples` used); every chunk has the same
+      shape, so one compilation.
 
     **Returns:** a `PathwiseSensitivity` per metric, by metric name.
     """
@@ -81,9 +83,9 @@ def pathwise_sensitivities(
         raise ValueError("model: expected the drive's ErrorModel (its sources in the drive's order)")
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
         raise ValueError(f"n_samples: must be a whole number ≥ 1, got {n_samples!r}")
+    chunk = min(as_int("chunk", chunk, minimum=1), int(n_samples))
     k0 = as_key(key)
     params, static = eqx.partition(model, eqx.is_inexact_array)
-    chunk = max(1, min(int(chunk), int(n_samples)))
 
     @eqx.filter_jit
     def chunk_grad(p, idx, weight):

@@ -1,0 +1,189 @@
+"""Checks at the public boundary: each refuses an invalid argument with a message naming it, and still accepts a valid one."""
+
+import math
+import types
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gearte
+from gearte import budget_problem, contributions, extrema, pareto_front, smooth_quantile
+from gearte.core.twoscale import extrema_two_scale
+from gearte.drives import ExplicitDrive, ExplicitTerm
+from gearte.identification import MeasuredRecord, RecordError, reassemble
+from gearte.identification import assembly as assembly_mod
+
+GAIN = 1e-5
+
+
+def explicit_drive():
+    return ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 3)], gain=GAIN)
+
+
+def small_problem(**kw):
+    d = explicit_drive()
+    law = lambda t: gearte.Rayleigh(t / 2, truncate_at=t)
+    model = gearte.ErrorModel(
+        {"a": gearte.ErrorSource(law(10.0), gearte.UniformPhase()), "b": gearte.ErrorSource(law(10.0), gearte.UniformPhase())},
+        d.error_sources,
+    )
+    costs = {"a": gearte.Reciprocal(0.0, 10.0), "b": gearte.Reciprocal(0.0, 40.0)}
+    return budget_problem(d, model, costs=costs, nominal={"a": 10.0, "b": 10.0}, spec=20 * GAIN, statistic=gearte.Yield(0.99), **kw)
+
+
+# 1. MeasuredRecord
+
+
+def test_measured_record_refuses_mismatched_lengths_and_non_finite_values():
+    theta = np.linspace(0.0, 2 * math.pi, 32, endpoint=False)
+    te = 1e-5 * np.sin(theta)
+    with pytest.raises(RecordError, match=r"bench\.csv: theta has 32 samples but te has 31: give one TE value per input angle"):
+        MeasuredRecord(theta, te[:-1], source="bench.csv")
+    bad = te.copy()
+    bad[4] = np.nan
+    with pytest.raises(RecordError, match=r"record: te, data row 5: not a finite number"):
+        MeasuredRecord(theta, bad)
+    with pytest.raises(RecordError, match=r"theta, data row 1: not a finite number"):
+        MeasuredRecord(np.where(theta == 0.0, np.inf, theta), te)
+    with pytest.raises(RecordError, match=r"te must be 1-D .* got shape \(32, 1\)"):
+        MeasuredRecord(theta, te[:, None])
+    r = MeasuredRecord(theta, te, input_rpm=60.0)
+    assert r.points_per_rev == pytest.approx(32.0)
+    # Under jit the fields are traced and pass unchecked.
+    out = jax.jit(lambda t, v: MeasuredRecord(t, v).te * 2)(jnp.asarray(theta), jnp.asarray(te))
+    np.testing.assert_allclose(out, 2 * te)
+
+
+# 2. contributions
+
+
+def test_contributions_checks_n_samples_and_tolerances():
+    p = small_problem()
+    t = {"a": 4.0, "b": 7.0}
+    with pytest.raises(ValueError, match=r"n_samples: must be ≥ 1, got 0"):
+        contributions(p, t, key=1, n_samples=0)
+    with pytest.raises(ValueError, match=r"n_samples: must be ≥ 1, got -5"):
+        contributions(p, t, key=1, n_samples=-5)
+    with pytest.raises(ValueError, match=r"tolerances\['a'\]: a tolerance must be finite and > 0 µm, got -4\.0"):
+        contributions(p, {"a": -4.0, "b": 7.0}, key=1, n_samples=64)
+    with pytest.raises(ValueError, match=r"tolerances: give one tolerance \(µm\) per error source \['a', 'b'\]; missing \['b'\]"):
+        contributions(p, {"a": 4.0}, key=1, n_samples=64)
+    c = contributions(p, t, key=1, n_samples=64)
+    assert set(c) == {"a", "b"} and all(math.isfinite(v) and v > 0 for v in c.values())
+
+
+# 3. pareto_front
+
+
+def test_pareto_front_checks_each_spec_and_throws_when_asked():
+    p = small_problem()
+    with pytest.raises(ValueError, match=r"pareto_front: specs\[1\]: Constraint\.spec: the specification of peak must be > 0, got -1\.0"):
+        pareto_front(p, [20 * GAIN, -1.0], key=0, n_samples=64, n_check=1000)
+    with pytest.raises(ValueError, match=r"pareto_front: specs\[0\]: .*got nan"):
+        pareto_front(p, [math.nan], key=0, n_samples=64, n_check=1000)
+    # A spec the minimum tolerances cannot meet: reported by default (the current behaviour), raised with throw=True.
+    tight = small_problem(minimum={"a": 5.0, "b": 5.0})
+    (r,) = pareto_front(tight, [1 * GAIN], key=0, n_samples=256, n_check=1000)
+    assert r.result == gearte.RESULTS.infeasible and math.isnan(r.cost)
+    with pytest.raises(RuntimeError, match=r"optimise_budget: even at the tolerances .*cannot be met.*pass throw=False"):
+        pareto_front(tight, [1 * GAIN], key=0, n_samples=256, n_check=1000, throw=True)
+
+
+# 4. reassemble
+
+
+def test_reassemble_passes_throw_to_allocate_measured(monkeypatch):
+    d = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 1)], gain=GAIN)  # two lines at one frequency: they cancel
+    errs = {"a": gearte.Eccentricity(5.0, 0.3), "b": gearte.Eccentricity(3.0, 0.3)}
+    sol = types.SimpleNamespace(groups=(), errors=errs)
+    r = reassemble(d, sol, adjust={"b": None}, starts=2)  # pyright: ignore[reportArgumentType]
+    np.testing.assert_allclose(float(r.te), 2.0 * GAIN, rtol=1e-6)  # |A1 − A2|
+    seen = []
+    real = assembly_mod.allocate_measured
+    monkeypatch.setattr(assembly_mod, "allocate_measured", lambda *a, **kw: seen.append(kw["throw"]) or real(*a, **kw))
+    reassemble(d, sol, adjust={"b": None}, starts=2)  # pyright: ignore[reportArgumentType]
+    reassemble(d, sol, adjust={"b": None}, starts=2, throw=False)  # pyright: ignore[reportArgumentType]
+    assert seen == [True, False]
+
+
+# 5. pathwise_sensitivities
+
+
+def test_pathwise_sensitivities_refuses_a_chunk_below_one():
+    d = explicit_drive()
+    model = gearte.ErrorModel(
+        {
+            "a": gearte.ErrorSource(gearte.Rayleigh(5.0), gearte.UniformPhase()),
+            "b": gearte.ErrorSource(gearte.Rayleigh(5.0), gearte.UniformPhase()),
+        },
+        d.error_sources,
+    )
+    for bad in (0, -3):
+        with pytest.raises(ValueError, match=rf"chunk: must be ≥ 1, got {bad}"):
+            gearte.pathwise_sensitivities(d, model, gearte.Peak(), key=0, n_samples=2, chunk=bad)
+    out = gearte.pathwise_sensitivities(d, model, gearte.Peak(), key=0, n_samples=2, chunk=1)
+    assert math.isfinite(out["peak"].mean) and out["peak"].n_samples == 2
+
+
+# 6. smooth_quantile
+
+
+def test_smooth_quantile_checks_level_width_and_shape():
+    x = jnp.linspace(1.0, 2.0, 101)
+    for level in (2.0, 0.0, 1.0, -0.1):
+        with pytest.raises(ValueError, match=r"smooth_quantile: level must be in \(0, 1\)"):
+            smooth_quantile(x, level, 0.01)
+    for width in (-0.01, 0.0, math.inf):
+        with pytest.raises(ValueError, match=r"smooth_quantile: width must be finite and > 0"):
+            smooth_quantile(x, 0.9, width)
+    with pytest.raises(ValueError, match=r"smooth_quantile: x must be 1-D .* got shape \(101, 1\)"):
+        smooth_quantile(x[:, None], 0.9, 0.01)
+    q = float(smooth_quantile(x, 0.9, 1e-4))
+    assert q == pytest.approx(1.9, abs=2e-2)
+    # Traced level and width pass unchecked (no concretisation error), and give the same value.
+    traced = jax.jit(lambda v, lv, w: smooth_quantile(v, lv, w))(x, 0.9, 1e-4)
+    np.testing.assert_allclose(float(traced), q, rtol=1e-12)
+
+
+# 7. Eccentricity
+
+
+def test_eccentricity_refuses_shapes_that_do_not_broadcast():
+    with pytest.raises(ValueError, match=r"Eccentricity: magnitude of shape \(2,\) and phase of shape \(3,\) do not broadcast"):
+        gearte.Eccentricity([1.0, 2.0], [0.0, 1.0, 2.0])
+    with pytest.raises(ValueError, match=r"do not broadcast"):
+        jax.jit(lambda m, p: gearte.Eccentricity(m, p).magnitude)(jnp.ones(2), jnp.zeros(3))
+    e = gearte.Eccentricity([1.0, 2.0], [0.0, 1.0])
+    assert e.magnitude.shape == e.phase.shape == (2,)
+    assert gearte.Eccentricity([1.0, 2.0], 0.5).phase.shape == ()
+    assert gearte.Eccentricity(1.0, [0.0, 1.0, 2.0]).phase.shape == (3,)
+
+
+# 8. extrema
+
+
+def test_extrema_refuses_negative_newton_steps():
+    d = explicit_drive()
+    sig = d.signal({"a": gearte.Eccentricity(5.0, 0.3), "b": gearte.Eccentricity(3.0, 1.0)})
+    with pytest.raises(ValueError, match=r"extrema: newton_steps: must be ≥ 0, got -1"):
+        extrema(sig, newton_steps=-1)
+    with pytest.raises(ValueError, match=r"extrema_two_scale: newton_steps: must be ≥ 0, got -2"):
+        extrema_two_scale(sig, newton_steps=-2)
+    e0, e1 = extrema(sig, newton_steps=0), extrema(sig, newton_steps=1)
+    assert float(e0.max) <= float(e1.max) + 1e-15
+    assert float(extrema_two_scale(sig, newton_steps=0).max) <= float(e1.max) + 1e-15
+
+
+# 9. Optimised
+
+
+def test_optimised_checks_to_as_relative_phase_does():
+    for bad in (1, ""):
+        with pytest.raises(ValueError, match=r"RelativePhase\.to: name the error source"):
+            gearte.RelativePhase(bad)  # pyright: ignore[reportArgumentType]
+        with pytest.raises(ValueError, match=r"Optimised\.to: name the error source whose phase this one follows"):
+            gearte.Optimised(bad)  # pyright: ignore[reportArgumentType]
+    assert gearte.Optimised().to is None and gearte.Optimised(None).reference is None
+    assert gearte.Optimised("sun").reference == "sun"
