@@ -4,7 +4,7 @@ Every drive in `gearte.drives.DRIVES` must come with an example study file and p
 checks through the protocol alone: the study file loads and `gearte check` accepts it; zero
 errors give a TE without variation (zero for a linear drive); `vmap` over samples equals a
 Python loop; Monte Carlo values are bit-identical for any chunk size; gradients of a Monte
-Carlo mean with respect to every law parameter are finite (and match float64 finite
+Carlo mean with respect to every law parameter are finite and not all zero (and match float64 finite
 differences for the toy drive); and a short `gearte run` writes every output.
 """
 
@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 import toy_drive
 from conftest import CONTRACT_SAMPLES, CONTRACT_SEED
+from jax.flatten_util import ravel_pytree
 
 import gearte
 from gearte import cli
@@ -132,7 +133,7 @@ def test_results_do_not_depend_on_the_chunk_size(case):
 
 
 def test_gradients_of_a_monte_carlo_mean_are_finite(case):
-    study, _ = case
+    study, name = case
     params, static = eqx.partition(study.errors, eqx.is_inexact_array)
     keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.key(11), i))(jnp.arange(2))
 
@@ -140,9 +141,25 @@ def test_gradients_of_a_monte_carlo_mean_are_finite(case):
         fn = gearte.TEStudy(study.drive, eqx.combine(p, static), metric=study.metric)
         return jnp.mean(jax.vmap(lambda k: study.metric.smooth(study.drive, fn.response(k)))(keys))
 
-    g = eqx.filter_jit(jax.grad(mean_metric))(params)
+    value, g = eqx.filter_jit(jax.value_and_grad(mean_metric))(params)
     leaves = jax.tree.leaves(g)
     assert leaves and all(bool(jnp.all(jnp.isfinite(x))) for x in leaves)
+    # The law parameters (every inexact leaf of the error model is one of a magnitude law's) move the mean: not all
+    # zero, nor round-off (1e-21 where a parameter does not enter); the largest elasticity |p ∂mean/∂p| / |mean| is
+    # over 0.05 in every example, well above 1e-3.
+    flat, unflatten = ravel_pytree(params)
+    grad = ravel_pytree(g)[0]
+    assert float(jnp.max(jnp.abs(grad * flat))) > 1e-3 * abs(float(value)), g
+    if name == "toy":
+        # Along a random direction of the law parameters, against a float64 central difference with the same keys
+        # (common random numbers: the draws move with the parameters only).
+        d = jnp.asarray(np.random.default_rng(0).standard_normal(flat.shape))
+        h = 1e-4
+        at = eqx.filter_jit(lambda x: mean_metric(unflatten(x)))
+        fd = (float(at(flat + h * d)) - float(at(flat - h * d))) / (2 * h)
+        directional = float(grad @ d)
+        assert directional != 0.0
+        assert directional == pytest.approx(fd, rel=1e-6)
 
 
 def test_a_short_run_writes_every_output(case, tmp_path, monkeypatch, capsys, example_run):

@@ -15,6 +15,7 @@ from scipy import stats as sps
 
 import gearte
 from gearte import ErrorModel, ErrorSource
+from gearte.drives import wang2013
 
 N = 20_000
 
@@ -170,6 +171,26 @@ def test_magnitude_and_deviation_laws_in_the_error_model():
     # A normal magnitude is allowed, as in 0.1: a negative draw is that magnitude at the opposite phase.
     m = _eccentricity_model(gearte.Normal(5.0, 1.0))
     assert m.sample(jax.random.key(1))["e"].magnitude.shape == (1,)
+    # Checked on Wang et al.'s planetary (Table 1 tolerances, fixed phases): the sun's eccentricity drawn at −13 µm
+    # (a normal law of zero spread) at phase 0.4 gives the TE of +13 µm at 0.4 + π.
+    drive = wang2013.table1_drive()
+    fixed = {n: ErrorSource(gearte.Fixed(t), gearte.FixedPhase(0.1 * i)) for i, (n, t) in enumerate(wang2013.TABLE1_TOLERANCES_UM.items())}
+    negative = ErrorModel(
+        dict(fixed, sun_manufacturing=ErrorSource(gearte.Normal(-13.0, 0.0), gearte.FixedPhase(0.4))), drive.error_sources
+    )
+    opposite = ErrorModel(
+        dict(fixed, sun_manufacturing=ErrorSource(gearte.Fixed(13.0), gearte.FixedPhase(0.4 + math.pi))), drive.error_sources
+    )
+    e_neg, e_opp = negative.sample(jax.random.key(2)), opposite.sample(jax.random.key(2))
+    sun = e_neg["sun_manufacturing"]
+    z = np.asarray(sun.magnitude) * np.exp(1j * np.asarray(sun.phase))  # the drawn phasor, however it is written
+    np.testing.assert_allclose(z, [13.0 * np.exp(1j * (0.4 + math.pi))], rtol=1e-15, atol=1e-13)
+    s_neg, s_opp = drive.signal(e_neg), drive.signal(e_opp)
+    assert float(jnp.max(jnp.abs(s_neg.sin_coef))) > 1e-5  # rad: the TE is not zero
+    for a, b in ((s_neg.offset, s_opp.offset), (s_neg.cos_coef, s_opp.cos_coef), (s_neg.sin_coef, s_opp.sin_coef)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-18)
+    peak = [float(gearte.TEStudy(drive, mod, metric=gearte.Peak())(jax.random.key(2))) for mod in (negative, opposite)]
+    assert peak[0] == pytest.approx(peak[1], rel=1e-12)
 
 
 def test_rule_errors():

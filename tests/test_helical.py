@@ -65,7 +65,13 @@ def test_geometry_matches_iso21771_by_hand_and_the_file_uses_iso6336_stiffness(m
     np.testing.assert_allclose(g.contact_ratio, [eps_ext, eps_int], rtol=1e-12)
     np.testing.assert_allclose(g.overlap_ratio, 230 * math.sin(b) / (math.pi * mn), rtol=1e-12)
     assert float(g.mesh_frequency) == pytest.approx(99 * 22 / 60)
-    _, c_gamma = iso6336_mesh_stiffness(st)
+    # ISO 6336-1 method B by hand (x = 0, solid gears, standard basic rack): z_n = z/(cos²β_b cos β) with
+    # sin β_b = sin β cos α_n, so z_n = 22.21 (sun) and 41.25 (planet); q' = 0.04723 + 0.15551/z_n1 + 0.25791/z_n2,
+    # with z_n2 = ∞ for the internal mesh (the planet is gear 1 there): q' = 0.06048 / 0.05100;
+    # c' = 0.8 cos β / q' = 12.96 / 15.37 N/(mm·µm); c_γα = c' (0.75 ε_α + 0.25).
+    c_single, c_gamma = iso6336_mesh_stiffness(st)
+    np.testing.assert_allclose(c_single, [12.96, 15.37], rtol=2e-3)
+    np.testing.assert_allclose(c_gamma, np.array([12.96, 15.37]) * (0.75 * np.array([eps_ext, eps_int]) + 0.25), rtol=2e-3)
     np.testing.assert_allclose(st.mesh_stiffness, c_gamma, atol=0.006)
 
 
@@ -105,6 +111,9 @@ def test_single_pair_stiffness_keeps_the_iso_mean_and_peaks_at_c_prime(model):
     np.testing.assert_allclose(per_slice[n:], float(g.contact_ratio[1]), rtol=2e-3)
     c_single, c_mesh = iso6336_mesh_stiffness(model.stage)
     peak = np.asarray(c_single / (c_mesh / g.contact_ratio))  # c' over the mean single-pair stiffness, per mesh
+    # by hand from c_γα = c' (0.75 ε_α + 0.25): c'/(c_γα/ε_α) = ε_α/(0.75 ε_α + 0.25)
+    eps = np.asarray(g.contact_ratio)
+    np.testing.assert_allclose(peak, eps / (0.75 * eps + 0.25), rtol=1e-12)
     _, w_flat = _weights(model, 8)
     ratio = np.asarray(jnp.max(w, axis=(0, 2, 3)) / jnp.max(w_flat, axis=(0, 2, 3)))  # the largest weight of a pair
     np.testing.assert_allclose(ratio[:n], peak[0], rtol=1e-3)

@@ -85,9 +85,19 @@ def test_1995_published_table_rows():
         got = [gearte.iso1328_tolerances(standard=S1995, module=m, diameter=d, grade=q)["F_p"] for q in range(13)]
         assert got == F_p_row
         assert [gearte.iso1328_tolerances(standard=S1995, module=m, diameter=d, grade=q)["f_pt"] for q in range(5, 10)] == f_pt_row
+
     # Scaling the rounded grade-5 value (11 µm) would give 22 at grade 7 and 88 at grade 11,
-    # not the tabulated 23 and 90: the unrounded value is scaled, then rounded.
-    assert round(11.0 * 2.0) == 22 and round(11.0 * 8.0) == 88
+    # not the tabulated 23 and 90: the unrounded value is scaled (by √2 per grade: 22.505694 and 90.022777), then rounded.
+    def F_p(q, rounded=True):
+        if rounded:
+            return gearte.iso1328_tolerances(standard=S1995, module=1.0, diameter=10.0, grade=q)["F_p"]
+        return float(gearte.iso1328_tolerance("F_p", standard=S1995, module=1.0, diameter=10.0, grade=q))
+
+    assert F_p(5) == 11.0
+    assert (F_p(7), F_p(11)) == (23.0, 90.0) != (round(F_p(5) * 2.0), round(F_p(5) * 8.0))
+    np.testing.assert_allclose(
+        [F_p(5, False), F_p(7, False), F_p(11, False)], np.array([1, 2, 8]) * (0.3 + 1.25 * math.sqrt(10.0) + 7), rtol=1e-12
+    )
 
 
 def test_1995_range_limits_belong_to_the_lower_range():
