@@ -216,7 +216,15 @@ def test_budget_example_through_gearte_run(tmp_path):
     assert b["tolerances_um"]["planet_assembly"] == pytest.approx(80.0)
     assert b["random_assembly"]["tolerances_um"]["planet_assembly"] < 8.0
     assert len(b["pareto"]) == 2
-    assert s["te"]["percentiles"]["99.73"] < 130.0
+    # The further Monte Carlo at the optimised tolerances (the study's seed, 3000 samples): its P99.73 is NumPy's
+    # linear-interpolation quantile of the per-sample values the run wrote (same values, same rule: to rounding),
+    # and it meets the spec, as the budget's verification on its own fresh samples claims (yield ≥ 0.9973 at 120″).
+    te = np.load(out / "samples.npz")["te"]
+    assert te.shape == (3000,)
+    np.testing.assert_allclose(s["te"]["percentiles"]["99.73"], np.percentile(te, 99.73), rtol=1e-12)
+    assert b["verified_yield"] >= b["target_yield"]
+    assert s["te"]["percentiles"]["99.73"] <= b["spec_arcsec"]
+    assert b["verified_statistic_arcsec"] <= b["spec_arcsec"]
     for f in ("pareto.png", "contributions.png"):
         assert (out / f).exists()
 
