@@ -109,7 +109,7 @@ def test_seed_rule_worst_case_is_the_papers_131_5(seed_problem):
 
 
 def test_optimal_rule_closes_the_eighth_order_triangle(seed_problem):
-    r = allocate_rule(seed_problem, objective="worst_case", key=0, starts=6, n_check=2000)
+    r = allocate_rule(seed_problem, objective=gearte.WorstCase(), key=0, starts=6, n_check=2000)
     k = ARCSEC / (48000 * math.cos(math.pi / 9))
     # 21, 12 and 28.19 µm satisfy the triangle inequality: the ω_s/8 group can vanish, leaving
     # 13 µm (7/8) + 10.94 µm (7/24): what collinear compensation (λ = ±1) cannot reach.
@@ -184,6 +184,21 @@ def test_rule_problem_validation():
         allocate_measured(d, {"a": gearte.Eccentricity(1.0), "b": gearte.Eccentricity(1.0)}, adjust={}, key=0)
     with pytest.raises(ValueError, match="step"):
         allocate_measured(d, {"a": gearte.Eccentricity(1.0), "b": gearte.Eccentricity(1.0)}, adjust={"b": -1.0}, key=0)
+
+
+def test_rule_objectives_are_objects_and_their_names_are_deprecated():
+    # The objective is an object (options are objects, not strings); its old name still works, with a
+    # DeprecationWarning naming the class, and gives the same rule (same key).
+    d = explicit(("a", 1, 0.0), ("b", 1, 0.0), ("c", 3, 0.0))
+    model = gearte.ErrorModel({n: gearte.ErrorSource(1.0, gearte.UniformPhase()) for n in ("a", "b", "c")}, d.error_sources)
+    p = rule_problem(d, model, adjust={"b": "relative"}, datum="a", tolerances={"a": 1, "b": 1, "c": 1})
+    kw = dict(key=3, starts=2, n_samples=16, n_check=200)
+    r = allocate_rule(p, objective=gearte.Expected(), **kw)
+    assert r.objective == "expected"
+    with pytest.warns(DeprecationWarning, match=r"gearte\.Expected\(\)"):
+        old = allocate_rule(p, objective="expected", **kw)
+    np.testing.assert_array_equal(old.offsets["b"], r.offsets["b"])
+    assert {c().name for c in (gearte.WorstCase, gearte.Expected, gearte.Robust)} == {"worst_case", "expected", "robust"}
 
 
 def test_unresolved_placeholder_cannot_be_sampled():

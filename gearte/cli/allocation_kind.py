@@ -13,7 +13,7 @@ from ..core.schema import MAX_SAMPLES, ConfigError, Table
 from ..core.solution import is_successful, message
 from ..core.units import UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import AbstractSinusoidalDrive, Figure
-from ..optimise.allocation import allocate_rule, evaluate_rule, rule_problem
+from ..optimise.allocation import RULE_OBJECTIVES, allocate_rule, evaluate_rule, rule_problem
 from ..studies.errors import ErrorModel, ErrorSource
 from ..studies.laws import FixedPhase, Optimised, RelativePhase, UniformPhase
 from ..studies.montecarlo import TEStudy, as_key, monte_carlo
@@ -93,7 +93,7 @@ class Allocation(AbstractStudyKind):
             seed_rule = {n: sr.angle(n) for n in optimised}
             sr.finish()
         return AllocationSpec(
-            objective=t.string("objective", "worst_case", choices=("worst_case", "expected", "robust")),
+            objective=t.string("objective", "worst_case", choices=tuple(RULE_OBJECTIVES)),
             datum=datum,
             adjust={n: ("relative" if r.to is not None else "absolute") for n, r in optimised.items()},
             starts=t.integer("starts", 16, minimum=1, maximum=MAX_SAMPLES),
@@ -118,7 +118,7 @@ class Allocation(AbstractStudyKind):
         p = rule_problem(drive, study.errors, adjust=spec.adjust, datum=spec.datum, tolerances=tolerances)
         res = allocate_rule(
             p,
-            objective=spec.objective,
+            objective=RULE_OBJECTIVES[spec.objective](),
             key=k_opt,
             starts=spec.starts,
             n_samples=spec.surrogate_samples,

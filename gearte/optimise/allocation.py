@@ -19,8 +19,9 @@ Optimisation runs on smooth surrogates with optimistix (BFGS, multi-start under
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -300,12 +301,56 @@ def expected(
     return jnp.mean(jnp.asarray(monte_carlo(fn, key=key, n_samples=n_samples, block_size=1024, progress=False).values))
 
 
+class AbstractRuleObjective(eqx.Module):
+    """What `allocate_rule` minimises over the unknown phases (`WorstCase`, `Expected`, `Robust`)."""
+
+    name: ClassVar[str]
+
+
+class WorstCase(AbstractRuleObjective):
+    """The worst case: magnitudes at the tolerances, the worst unknown phases (exact; every unknown phase must
+    drive one frequency)."""
+
+    name: ClassVar[str] = "worst_case"
+
+
+class Expected(AbstractRuleObjective):
+    """The expected TE: magnitudes at the tolerances, mean over uniform unknown phases."""
+
+    name: ClassVar[str] = "expected"
+
+
+class Robust(AbstractRuleObjective):
+    """The expected TE with the magnitudes drawn by their laws too (e.g. Rayleigh within the tolerance)."""
+
+    name: ClassVar[str] = "robust"
+
+
+#: The rule objectives by name (a study file's ``[allocation] objective``).
+RULE_OBJECTIVES: dict[str, type[AbstractRuleObjective]] = {c.name: c for c in (WorstCase, Expected, Robust)}
+
+
+def _rule_objective(objective: Any) -> str:
+    """The name of a rule objective given as an object (or, deprecated, as its name)."""
+    if isinstance(objective, AbstractRuleObjective):
+        return objective.name
+    if isinstance(objective, str) and objective in RULE_OBJECTIVES:
+        warnings.warn(
+            f"allocate_rule(objective={objective!r}): give an objective object, "
+            f"gearte.{RULE_OBJECTIVES[objective].__name__}(); names are deprecated",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+        return objective
+    raise ValueError(f"objective: gearte.WorstCase(), gearte.Expected() or gearte.Robust(), got {objective!r}")
+
+
 class RuleAllocation(eqx.Module):
     """Result of `allocate_rule`: the chosen rule and its exact figures (rad).
 
     `offsets`: source → offset (rad) from the datum ("relative") or absolute phase.
     `worst_case`, `expected`, `robust`: the three objectives evaluated exactly (the last two
-    by Monte Carlo with `n_check` fresh samples); `objective`: which one was minimised;
+    by Monte Carlo with `n_check` fresh samples); `objective`: the name of the one minimised;
     `result`: the solve's `RESULTS` code; `starts`/`converged`: starts run and succeeded.
     """
 
@@ -335,7 +380,7 @@ def evaluate_rule(
 def allocate_rule(
     p: RuleProblem,
     *,
-    objective: str = "worst_case",
+    objective: AbstractRuleObjective | str = WorstCase(),
     key: int | PRNGKeyArray,
     starts: int = 16,
     n_samples: int = 512,
@@ -349,9 +394,10 @@ def allocate_rule(
     **Arguments:**
 
     - `p`: the problem (`rule_problem`).
-    - `objective`: "worst_case" (magnitudes at the tolerances, worst unknown phases),
-      "expected" (magnitudes at the tolerances, mean over uniform unknown phases) or
-      "robust" (magnitudes drawn by their laws too, e.g. Rayleigh within the tolerance).
+    - `objective`: `gearte.WorstCase()` (magnitudes at the tolerances, worst unknown phases),
+      `gearte.Expected()` (magnitudes at the tolerances, mean over uniform unknown phases) or
+      `gearte.Robust()` (magnitudes drawn by their laws too, e.g. Rayleigh within the tolerance). Their
+      names (``"worst_case"``, …) are still taken, with a `DeprecationWarning`.
     - `key`: seed or key (starts, common random numbers, the final check).
     - `starts`: optimiser starts under `vmap`.
     - `n_samples`: common random samples in the expected/robust surrogates.
@@ -362,8 +408,7 @@ def allocate_rule(
     **Returns:** a `RuleAllocation`.
     """
     require_x64()
-    if objective not in ("worst_case", "expected", "robust"):
-        raise ValueError(f"objective: 'worst_case', 'expected' or 'robust', got {objective!r}")
+    objective = _rule_objective(objective)
     k_start, k_crn, k_check = jax.random.split(as_key(key), 3)
     m = len(p.adjust)
     group, single = _groups(p)
