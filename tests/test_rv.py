@@ -349,7 +349,7 @@ def test_best_planet_assembly_is_a_coordinate_optimum_of_the_units_te():
     d = make(z_sun=12, z_planet=12, points=16)
     run_out = Eccentricity(jnp.asarray([12.0, 8.0, 10.0]), jnp.asarray([0.3, 2.0, 4.1]))
     errors = {"planet_eccentricity": run_out, "sun_eccentricity": Eccentricity(jnp.asarray([6.0]), jnp.asarray([1.0]))}
-    with pytest.raises(ValueError, match=r"metric: give a metric object such as gearte\.RVPeakToPeak"):
+    with pytest.raises(ValueError, match=r"metric: give a metric object such as gearte\.RVLostMotion\(\)"):
         best_planet_assembly(d, errors, metric="peak_to_peak")  # type: ignore[arg-type]
     out = best_planet_assembly(d, errors, metric=RVPeakToPeak())
     assert bool(out.result == RESULTS.successful)

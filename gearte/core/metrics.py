@@ -117,9 +117,12 @@ def public_name(cls: type) -> str:
 
 
 def check_offered(metric: Any, drive: Any, *, what: str = "metric") -> None:
-    """Raise a ValueError naming the drive's own metric classes unless `metric` is one of them (same name and
-    class: the cycloid-pin drive's ``lost_motion`` is not the RV reducer's)."""
+    """Raise a ValueError naming the drive's own metric classes unless `metric` is one of them (a metric object of
+    the same name and class: the cycloid-pin drive's ``lost_motion`` is not the RV reducer's)."""
     offered = drive.metrics
+    if not isinstance(metric, AbstractMetric):
+        first = public_name(type(next(iter(offered.values()))))
+        raise ValueError(f"{what}: give a metric object such as {first}(), got {metric!r}")
     if metric.name in offered and type(offered[metric.name]) is type(metric):
         return
     choices = ", ".join(f"{public_name(type(m))}()" for m in offered.values())

@@ -104,8 +104,6 @@ def best_planet_assembly(
     require_x64()
     if not isinstance(drive, RVKHV):
         raise ValueError(f"drive: expected an RVKHV, got {type(drive).__name__}")
-    if not isinstance(metric, AbstractMetric):
-        raise ValueError(f"metric: give a metric object such as gearte.RVPeakToPeak(), got {metric!r}")
     check_offered(metric, drive)
     rounds_max = as_int("max_rounds", max_rounds, minimum=1)
     n, zg = drive.cranks, drive.z_planet

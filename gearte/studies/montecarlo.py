@@ -77,8 +77,6 @@ class TEStudy(eqx.Module):
         if metric is None:
             metric = next(iter(offered.values()))
         for m in metric if isinstance(metric, tuple) else (metric,):
-            if not isinstance(m, AbstractMetric):
-                raise ValueError(f"metric: expected a metric object such as gearte.Peak(), got {m!r}")
             check_offered(m, drive)
         self.drive, self.errors, self.metric = drive, errors, metric
 
