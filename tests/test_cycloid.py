@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from conftest import CONTRACT_SAMPLES, CONTRACT_SEED
 from scipy.optimize import brentq, minimize_scalar
+from trace_count import traces
 
 import gearte
 from gearte import cli
@@ -529,6 +530,27 @@ def test_optimiser_keeps_the_lost_motion_within_spec_and_gains_pairs():
     m = unit_metrics(res.drive, None, positions=pitch_angles(d, 4))
     assert float(m["loaded_pairs_mean"]) == pytest.approx(res.loaded_pairs_mean)
     assert all(r in ("successful", "max_steps_reached", "nonlinear_max_steps_reached") for s in res.starts for r in s.results)
+
+
+def test_optimiser_of_another_reducer_traces_nothing():
+    # One stage, each reducer's measured errors: the solve is compiled for the stage's structure and shapes (those of
+    # the test above: run after it, nothing is compiled here); another reducer traces nothing, and its answer is its own.
+    d = modified()
+    pos = pitch_angles(d, 4)
+    units = [{"eccentricity": 5.0, "pin_radius": -10.0}, {"eccentricity": 12.0, "pin_radius": 4.0}]
+    kw = dict(lost_motion_max=20 / ARCMIN, radial_clearance_min=0.2, positions=pos, starts=[(-0.1, 0.3)], max_steps=60, throw=False)
+    first = gearte.optimise_modification(d, units[0], **kw)
+    with traces() as seen:
+        second = gearte.optimise_modification(d, units[1], **kw)
+    assert not seen, dict(seen)  # neither the solve (`_solve_penalised`) nor anything else
+    assert second.starts[0].end != first.starts[0].end
+    # Its counts are the exact ones of its own errors at its modification.
+    m = unit_metrics(second.drive, units[1], positions=pos)
+    assert float(m["lost_motion_max"]) == pytest.approx(second.lost_motion_max, rel=1e-12)
+    assert float(m["loaded_pairs_mean"]) == pytest.approx(second.loaded_pairs_mean, rel=1e-12)
+    # The first reducer again: exactly its own path (nothing of the second kept in the compiled solve).
+    again = gearte.optimise_modification(d, units[0], **kw)
+    assert [(s.end, s.results, s.steps) for s in again.starts] == [(s.end, s.results, s.steps) for s in first.starts]
 
 
 def test_optimiser_checks_its_arguments():

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from conftest import CONTRACT_SAMPLES, CONTRACT_SEED
+from trace_count import traces
 
 import gearte
 from gearte import Components, ConfigError, Eccentricity, ErrorModel, ErrorSource, Rayleigh, UniformPhase, to_signal
@@ -362,7 +363,7 @@ def test_assembly_cancels_within_a_class():
     drive = HarmonicDrive(180, 182, src, pitch_diameter=90.0)
     errs = {"cs_a": Eccentricity(10.0, 0.2), "cs_b": Eccentricity(6.0, 1.0)}
     # throw=False: the BFGS tolerances (rtol 1e-9, atol 1e-12 × the TE scale, kept as they were so that the example's
-    # numbers stay the same) lie below the surrogate's rounding, so starts end at max_steps with the optimum reached
+    # numbers stay the same) lie below the surrogate's rounding, so starts may end at max_steps with the optimum reached
     # (`test_assembly_reports_its_result_and_throws`); the result is checked here by its values.
     res = optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, throw=False)
     k = k_hand(180, 182, 90.0) / math.cos(ALPHA)
@@ -372,6 +373,29 @@ def test_assembly_cancels_within_a_class():
     assert res.class_least["circular_spline"] == pytest.approx(k * 4.0, rel=1e-12)
     turned = (1.0 + res.turns["cs_b"]) - 0.2
     assert math.cos(2 * turned) == pytest.approx(-1.0, abs=1e-6)
+
+
+def test_assembly_of_another_unit_traces_nothing():
+    # A production batch: one drive, each unit's measured errors, the assembly of each chosen in a loop. The solve is
+    # compiled for the drive's structure and shapes (those of the test above: run after it, nothing is compiled here);
+    # another unit traces nothing and gets its own optimum (the closed form of two CS sources).
+    src = [HarmonicSource("cs_a", "circular_spline", tolerance=20), HarmonicSource("cs_b", "circular_spline", tolerance=12)]
+    drive = HarmonicDrive(180, 182, src, pitch_diameter=90.0)
+    units = [
+        {"cs_a": Eccentricity(10.0, 0.2), "cs_b": Eccentricity(6.0, 1.0)},
+        {"cs_a": Eccentricity(7.0, 0.5), "cs_b": Eccentricity(9.0, 2.0)},
+    ]
+    first = optimise_assembly(drive, units[0], adjustable=["cs_b"], starts=4, throw=False)
+    with traces() as seen:
+        second = optimise_assembly(drive, units[1], adjustable=["cs_b"], starts=4, throw=False)
+    assert not seen, dict(seen)  # neither the solve (`_solve_all`) nor anything else
+    k = k_hand(180, 182, 90.0) / math.cos(ALPHA)
+    assert second.before == pytest.approx(2 * k * abs(7 + 9 * np.exp(2j * 1.5)), rel=1e-9)
+    assert second.after == pytest.approx(2 * k * 2.0, rel=1e-6)  # |9 − 7| µm
+    assert math.cos(2 * ((2.0 + second.turns["cs_b"]) - 0.5)) == pytest.approx(-1.0, abs=1e-6)
+    # The first unit again: its own numbers, exactly (nothing of the second unit kept in the compiled solve).
+    again = optimise_assembly(drive, units[0], adjustable=["cs_b"], starts=4, throw=False)
+    assert (again.before, again.after, again.turns, again.converged) == (first.before, first.after, first.turns, first.converged)
 
 
 def test_assembly_cannot_cancel_cs_against_fs():
@@ -395,14 +419,15 @@ def test_assembly_reports_its_result_and_throws():
     drive = HarmonicDrive(180, 182, src, pitch_diameter=90.0)
     errs = {"cs_a": Eccentricity(10.0, 0.2), "cs_b": Eccentricity(6.0, 1.0)}
     k = k_hand(180, 182, 90.0) / math.cos(ALPHA)
-    # The optimum is reached within 16 BFGS steps, but no start meets the tolerances (near the optimum every step
-    # is rejected by the line search), and the result says so: it is never dropped.
-    res = optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, max_steps=16, throw=False)
+    # The optimum is reached within 8 BFGS steps, but no start meets the tolerances (near the optimum every step
+    # is rejected by the line search), and the result says so: it is never dropped. (Not 16 steps: by then a start
+    # may meet them, or not, as the last bits of the surrogate fall — the solve's rounding, not the optimum.)
+    res = optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, max_steps=8, throw=False)
     assert res.after == pytest.approx(2 * k * 4.0, rel=1e-6)
     assert res.result == gearte.RESULTS.nonlinear_max_steps_reached and res.starts == 5 and res.converged == 0
     # With throw=True (the default) an unsuccessful solve raises, naming the solver and the reason.
     with pytest.raises(RuntimeError, match="optimise_assembly: The maximum number of steps"):
-        optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, max_steps=16)
+        optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, max_steps=8)
 
 
 @pytest.mark.parametrize(

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from trace_count import traces
 
 from gearte import AbstractStiffnessModel, MeanStiffness, SinglePairStiffness, SlicedStiffness, TransverseStiffness
 from gearte.core.signal import evaluate
@@ -213,6 +214,35 @@ def test_stiffness_model_must_be_an_object_and_files_name_one(model, tmp_path):
     path.write_text(text.replace('stiffness_model = "slices"', 'stiffness_model = "spur"'), encoding="utf-8")
     with pytest.raises(ValueError, match=r"\[model\]\.stiffness_model: one of 'slices', 'transverse', 'mean', 'single_pair', got 'spur'"):
         load_helical(path)
+
+
+def test_wind_turbine_report_shares_the_drive_s_compiled_solve(model, tmp_path):
+    # The report solves each stage with the drive's own jitted `response` (`_response_jit`), not with a jit of its
+    # own around it: after the drive's solve, a report of the same structure and shapes (the fixture's reduced model,
+    # read from a file) traces nothing, and neither does a report of another stage (less power) of those shapes.
+    text = EXAMPLE.read_text(encoding="utf-8")
+    for old, new in (
+        ("n_slices = 8 ", "n_slices = 4 "),
+        ("n_periods = 20 ", "n_periods = 4 "),
+        ("samples_per_period = 128", "samples_per_period = 32"),
+    ):
+        assert old in text
+        text = text.replace(old, new)
+    small, other = tmp_path / "small.toml", tmp_path / "other.toml"
+    small.write_text(text, encoding="utf-8")
+    other.write_text(text.replace("power_kw = 750.0", "power_kw = 700.0"), encoding="utf-8")
+    own = model.response()
+    with traces() as seen:
+        first = wind_turbine_report(small, stiffness_models=(SlicedStiffness(),))
+    assert not {"_response_jit", "response"} & set(seen), dict(seen)  # neither the solve nor a jit around it
+    with traces() as seen:
+        second = wind_turbine_report(other, stiffness_models=(SlicedStiffness(),))
+    assert not seen, dict(seen)
+    n = model.stage.n_planets
+    for table, r in ((first, own), (second, load_helical(other).response())):
+        row = table.splitlines()[2]
+        assert row.startswith(f"| slices | {float(r.fluctuation[0]):.3f} | {float(r.fluctuation[n]):.3f} | "), row
+    assert first.splitlines()[2] != second.splitlines()[2]
 
 
 def test_parameter_files_name_the_table_and_key_of_a_bad_number(tmp_path):

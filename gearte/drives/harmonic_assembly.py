@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jaxtyping import Array
 
 from ..core.extrema import _basis, _grid_values, grid_size
 from ..core.precision import require_x64
@@ -73,6 +74,50 @@ def _starts_result(results, best: int) -> tuple[int, Any]:
     if not bool(ok[best]):
         return int(ok.sum()), RESULTS.promote(jax.tree.map(lambda v: v[best], results))
     return int(ok.sum()), RESULTS.successful if ok.all() else RESULTS.some_starts_failed
+
+
+def _turned(base: Mapping[str, Eccentricity], adjustable: Sequence[str], y) -> dict[str, Eccentricity]:
+    """`base` with the phase of each adjustable source advanced by its entry of `y`."""
+    out = dict(base)
+    for j, a in enumerate(adjustable):
+        out[a] = Eccentricity(base[a].magnitude, base[a].phase + y[j])
+    return out
+
+
+@eqx.filter_jit
+def _solve_all(
+    drive: HarmonicDrive,
+    base: dict[str, Eccentricity],
+    adjustable: tuple[str, ...],
+    cos_b: np.ndarray,
+    sin_b: np.ndarray,
+    width: Array,
+    atol: Array,
+    y0s: Array,
+    max_steps: int,
+) -> tuple[Array, Any, Array, Array]:
+    """BFGS on the smooth peak-to-peak from every start in `y0s`, then the exact peak-to-peak at every end and at
+    the unit as assembled (`optimise_assembly`). Module level, with the unit's values as arguments: a second unit
+    of the same drive and shapes reuses the compiled solve (`adjustable` and `max_steps` are static)."""
+
+    def smooth_p2p(y, args):
+        del args
+        sig = to_signal(drive.components(_turned(base, adjustable, y), tooth=False))
+        f = _grid_values(sig, cos_b, sin_b) / width
+        return width * (jax.nn.logsumexp(f) + jax.nn.logsumexp(-f))
+
+    def exact_p2p(y):
+        e = drive.extrema(drive.signal(_turned(base, adjustable, y)))
+        return e.max - e.min
+
+    solver = optx.BFGS(rtol=1e-9, atol=atol)  # pyright: ignore[reportArgumentType]  (a traced tolerance: a leaf, not static)
+
+    def one(y):
+        sol = optx.minimise(smooth_p2p, solver, y, max_steps=max_steps, throw=False)
+        return sol.value, sol.result
+
+    ys, results = jax.vmap(one)(y0s)
+    return ys, results, jax.vmap(exact_p2p)(ys), jax.vmap(exact_p2p)(y0s[:1])
 
 
 def check_adjustable(drive: HarmonicDrive, adjustable: Sequence[str]) -> list[str]:
@@ -137,36 +182,13 @@ def optimise_assembly(
     scale = float(jnp.sum(comp0.amplitude * comp0.gain)) or 1.0
     width = 1e-3 * scale
 
-    def errors_for(y):
-        out = dict(base)
-        for j, a in enumerate(adjustable):
-            out[a] = Eccentricity(base[a].magnitude, base[a].phase + y[j])
-        return out
-
-    def smooth_p2p(y, args):
-        del args
-        sig = to_signal(drive.components(errors_for(y), tooth=False))
-        f = _grid_values(sig, cos_b, sin_b) / width
-        return width * (jax.nn.logsumexp(f) + jax.nn.logsumexp(-f))
-
-    def exact_p2p(y):
-        e = drive.extrema(drive.signal(errors_for(y)))
-        return e.max - e.min
-
     y0 = jax.random.uniform(jax.random.key(key), (starts, len(adjustable)), minval=0.0, maxval=2 * math.pi)
     y0 = jnp.concatenate([jnp.zeros((1, len(adjustable))), y0], axis=0)
-    solver = optx.BFGS(rtol=1e-9, atol=1e-12 * scale)
-
-    @jax.jit
-    def solve_all(y0s):
-        def one(y):
-            sol = optx.minimise(smooth_p2p, solver, y, max_steps=max_steps, throw=False)
-            return sol.value, sol.result
-
-        ys, results = jax.vmap(one)(y0s)
-        return ys, results, jax.vmap(exact_p2p)(ys), jax.vmap(exact_p2p)(y0s[:1])
-
-    ys, results, vals, before = solve_all(y0)
+    # The unit's scale enters as arrays (the smoothing width and the solver's atol), so that other units of the
+    # same drive and shapes reuse the compiled solve.
+    ys, results, vals, before = _solve_all(
+        drive, base, tuple(adjustable), cos_b, sin_b, jnp.asarray(width), jnp.asarray(1e-12 * scale), y0, max_steps
+    )
     vals = np.asarray(vals)
     best = int(np.argmin(vals))
     converged, result = _starts_result(results, best)
@@ -175,7 +197,7 @@ def optimise_assembly(
         y_best, after = np.zeros(len(adjustable)), before
     else:
         y_best, after = np.asarray(ys[best]), float(vals[best])
-    final = errors_for(jnp.asarray(y_best))
+    final = _turned(base, adjustable, jnp.asarray(y_best))
     turns = {a: float((y_best[j] + math.pi) % (2 * math.pi) - math.pi) for j, a in enumerate(adjustable)}
     # Closed-form least resultant per line (fixed sources as one phasor, adjustable ones free).
     phasors = source_phasors(drive, base)

@@ -218,7 +218,7 @@ def wind_turbine_report(
         m = HelicalPlanetary(
             base.stage, n_slices=base.n_slices, stiffness_model=model, contact_smoothing=base.contact_smoothing, solver=base.solver
         )
-        r = eqx.filter_jit(m.response)()
+        r = m.response()  # jitted at module level (`_response_jit`): a second report of the same shapes traces nothing
         mean = jnp.mean(r.dte, axis=-1)
         lines.append(
             f"| {model.name} | {float(r.fluctuation[0]):.3f} | {float(r.fluctuation[n]):.3f} | {float(mean[0]):.2f} / {float(mean[n]):.2f} "

@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jaxtyping import ArrayLike
+from jaxtyping import Array, ArrayLike
 
 from ..core.precision import require_x64
 from ..core.schema import ConfigError, Table
@@ -90,6 +90,36 @@ def _with(drive: CycloidPin, x, rotation: bool) -> CycloidPin:
     R = drive.pin_circle_radius
     mod = CycloidModification(x[0], x[1], x[2] / R if rotation else jnp.zeros(()))
     return eqx.tree_at(lambda d: d.modification, drive, mod)
+
+
+@eqx.filter_jit
+def _solve_penalised(
+    drive: CycloidPin,
+    err: CycloidErrors,
+    pos: Array,
+    targets: Array,
+    x0: Array,
+    mu: Array,
+    rotation: bool,
+    max_steps: int,
+) -> tuple[Array, Any, Array]:
+    """BFGS on the penalised surrogate of `optimise_modification` from `x0` at penalty weight `mu`: the end, the
+    result code and the steps. `targets`: the lost-motion bounds (rad) and the radial clearance (mm) it aims at.
+    Module level, with the values as arguments: every start, weight and later call with the same drive structure
+    and shapes reuses one compiled solve (`rotation` and `max_steps` are static)."""
+    hi_t, lo_t, c_t = targets[0], targets[1], targets[2]
+
+    def objective(x, mu):
+        d = _with(drive, x, rotation)
+        m = grid_metrics(d, err, pos)
+        v1 = jax.nn.relu(m["lost_motion_max"] - hi_t) / ARCMIN
+        v2 = jax.nn.relu(lo_t - m["lost_motion_min"]) / ARCMIN
+        v3 = jax.nn.relu(c_t - (x[1] - x[0])) / 0.01
+        return -m["loaded_pairs_smooth"] + mu * (v1**2 + v2**2 + v3**2)
+
+    solver = optx.BFGS(rtol=1e-9, atol=1e-9)
+    sol = optx.minimise(objective, solver, x0, mu, max_steps=max_steps, throw=False)
+    return sol.value, sol.result, sol.stats["num_steps"]
 
 
 def _default_starts(drive: CycloidPin, target_rad: float, radial_min: float, rotation: bool) -> list[np.ndarray]:
@@ -186,23 +216,8 @@ def optimise_modification(
         )
 
     # The quadratic penalty leaves violations of order 1/μ; aim inside the constraints by a margin
-    # (10⁻³′ and 10⁻⁵ mm) so that the optimum holds them exactly.
-    hi_t, lo_t, c_t = lm_hi - 1e-3 * ARCMIN, lm_lo + 1e-3 * ARCMIN, c_lo + 1e-5
-
-    def objective(x, mu):
-        d = _with(drive, x, rotation)
-        m = grid_metrics(d, err, pos)
-        v1 = jax.nn.relu(m["lost_motion_max"] - hi_t) / ARCMIN
-        v2 = jax.nn.relu(lo_t - m["lost_motion_min"]) / ARCMIN
-        v3 = jax.nn.relu(c_t - (x[1] - x[0])) / 0.01
-        return -m["loaded_pairs_smooth"] + mu * (v1**2 + v2**2 + v3**2)
-
-    solver = optx.BFGS(rtol=1e-9, atol=1e-9)
-
-    @eqx.filter_jit
-    def solve(x0, mu):
-        sol = optx.minimise(objective, solver, x0, mu, max_steps=max_steps, throw=False)
-        return sol.value, sol.result, sol.stats["num_steps"]
+    # (10⁻³′ and 10⁻⁵ mm) so that the optimum holds them exactly. Arrays: another spec reuses the compiled solve.
+    targets = jnp.asarray([lm_hi - 1e-3 * ARCMIN, lm_lo + 1e-3 * ARCMIN, c_lo + 1e-5])
 
     m0 = drive.modification
     x_init = np.array(
@@ -221,7 +236,7 @@ def optimise_modification(
         x = jnp.asarray(x0, dtype=float)
         codes, steps = [], []
         for mu in PENALTY_WEIGHTS:
-            x_new, res, k = solve(x, jnp.asarray(mu))
+            x_new, res, k = _solve_penalised(drive, err, pos, targets, x, jnp.asarray(mu), rotation, max_steps)
             codes.append(result_name(res))
             steps.append(int(k))
             if bool(jnp.all(jnp.isfinite(x_new))):

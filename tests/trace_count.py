@@ -1,0 +1,36 @@
+"""Count JAX's traces of Python functions: ``with traces() as seen: …`` then ``seen["name"]``.
+
+A traced function (``jax.jit``, ``eqx.filter_jit``) is traced again only when its cache misses: a changed static
+argument, a new shape, or a new function object (a ``jax.jit`` made inside the function called). Tests use it to
+show that a second call with other values of the same shapes traces nothing. It reads JAX's public monitoring
+events (``jax.monitoring``), whose trace event names the function."""
+
+import collections
+import contextlib
+from collections.abc import Iterator
+
+import jax.monitoring
+
+_TRACE_EVENT = "/jax/core/compile/jaxpr_trace_duration"
+_active: list[collections.Counter] = []
+
+
+def _listener(event: str, duration: float, **kwargs) -> None:
+    del duration
+    if event == _TRACE_EVENT:
+        for counter in _active:
+            counter[str(kwargs.get("fun_name", "?"))] += 1
+
+
+jax.monitoring.register_event_duration_secs_listener(_listener)
+
+
+@contextlib.contextmanager
+def traces() -> Iterator[collections.Counter]:
+    """Function name → traces of it inside the block (nested traces included)."""
+    seen: collections.Counter = collections.Counter()
+    _active.append(seen)
+    try:
+        yield seen
+    finally:
+        _active.remove(seen)
