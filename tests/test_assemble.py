@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from trace_count import traces
 
 import gearte
 from gearte.identification import assemble_batch
@@ -69,3 +70,22 @@ def test_random_batches_below_one_is_refused_before_any_work():
     for bad in (0, -5, 2.5, True, np.int64(0)):
         with pytest.raises(ValueError, match="random_batches: the comparison needs at least one random assembly"):
             assemble_batch(DRIVE, parts(3, seed=7), random_batches=bad)
+
+
+def test_a_second_batch_of_the_same_drive_traces_nothing():
+    """Two batches of the same drive and size: the second call traces nothing (the search's functions are jitted
+    once at module level, the parts and turns being data), one call traces the assignment's row costs at most once
+    (not once per part type and round), and the second call's TE is that of its own parts at its assignment and turns."""
+    with traces() as first:
+        assemble_batch(DRIVE, parts(3, seed=1), key=0, random_batches=2)
+    assert sum(n for name, n in first.items() if "row_costs" in name) <= 1, dict(first)
+    p = parts(3, seed=2)
+    with traces() as seen:
+        out = assemble_batch(DRIVE, p, key=5, random_batches=2)
+    assert not seen, dict(seen)
+    for d in range(3):
+        errs = DRIVE.zero_errors()
+        for s in SOURCES:
+            i = out.assignment[s][d, 0]
+            errs[s] = gearte.Eccentricity(p[s].magnitude[i], p[s].phase[i] + out.turns[s][d, 0])
+        assert float(gearte.Peak()(DRIVE, DRIVE.signal(errs))) == pytest.approx(out.te[d], rel=1e-12)

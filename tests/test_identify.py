@@ -8,10 +8,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from trace_count import lowerings, traces
 
 import gearte
 from gearte.cli.config import load_study
-from gearte.drives import wang2013
+from gearte.drives import ExplicitDrive, ExplicitTerm, wang2013
 from gearte.identification import RecordError, diagnose, identification_problem, identify, read_record, reassemble, synthetic_record
 from gearte.identification.fit import Z95, _solve
 from gearte.identification.records import encoder_noise, write_record
@@ -250,3 +251,19 @@ def test_too_short_or_too_slow_record_says_how_long(planetary):
     slow = synthetic_record(PLANETARY, errs, key=0, revolutions=REVS, points_per_rev=1)
     with pytest.raises(RecordError, match="Nyquist"):
         identify(PLANETARY, slow)
+
+
+def test_a_second_problem_of_the_same_drive_traces_and_compiles_nothing():
+    """`identification_problem` twice for one drive and record grid, other turn values: the second call traces and
+    lowers nothing (the coefficients, their Jacobian and the signal's layout are jitted once at module level, not made
+    anew in each call), and it reads the second call's turn: turned by 0, the second record repeats the first and a, b
+    (one line) stay combined; turned by π/2 it separates them."""
+    d = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 1, offset=0.3), ExplicitTerm("c", 3)], gain=1e-5)
+    rec = synthetic_record(d, d.zero_errors(), key=0, revolutions=2, points_per_rev=32)
+    first = identification_problem(d, [rec, rec], turns=[{}, {"b": 0.0}])
+    assert [(g.kind, g.members) for g in first.groups] == [("combined", ("a", "b"))]
+    with traces() as seen, lowerings() as lowered:
+        second = identification_problem(d, [rec, rec], turns=[{}, {"b": math.pi / 2}])
+    assert not seen and not lowered, (dict(seen), dict(lowered))
+    assert second.labels == ("a", "b", "c") and not second.groups
+    assert second.turns == ((), (("b", math.pi / 2),))

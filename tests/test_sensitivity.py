@@ -9,11 +9,13 @@ import jax
 import numpy as np
 import pytest
 from scipy import stats as sps
+from trace_count import traces
 
 import gearte
 from gearte import budget_problem, contributions, sensitivity_table, sobol_indices
 from gearte.cli.config import load_study
 from gearte.drives import ExplicitDrive, ExplicitTerm, Planetary2KH
+from gearte.studies.sensitivity_pathwise import gradient_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 GAIN = 1e-5  # rad/µm
@@ -303,3 +305,26 @@ def test_bad_inputs():
     s = load_study(ROOT / "examples" / "planetary_wang2013_allocate.toml")
     with pytest.raises(ValueError, match="allocation optimiser"):
         sobol_indices(gearte.TEStudy(s.drive, s.errors), key=0, n=64)
+
+
+def test_a_second_pathwise_study_of_the_same_drive_traces_nothing():
+    """`pathwise_sensitivities` twice on one drive with other law scales and seed: the second call traces nothing (a
+    chunk's values and gradients are jitted once at module level, the laws' parameters and the key being data), and
+    its mean is that of its own samples, drawn and measured one by one; the peak of a linear drive is homogeneous of
+    degree 1 in the errors, so Σ scale·∂mean/∂scale = mean (Euler)."""
+    d = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 3)], gain=GAIN)
+
+    def model(sa, sb):
+        laws = {"a": gearte.Rayleigh(sa), "b": gearte.Rayleigh(sb)}
+        return gearte.ErrorModel({n: gearte.ErrorSource(law, gearte.UniformPhase()) for n, law in laws.items()}, d.error_sources)
+
+    gearte.pathwise_sensitivities(d, model(5.0, 2.0), gearte.Peak(), key=0, n_samples=3, chunk=2)
+    m = model(7.0, 3.0)
+    with traces() as seen:
+        out = gearte.pathwise_sensitivities(d, m, gearte.Peak(), key=1, n_samples=3, chunk=2)["peak"]
+    assert not seen, dict(seen)
+    key = jax.random.key(1)
+    mean = np.mean([float(gearte.Peak()(d, d.response(m.sample(jax.random.fold_in(key, i))))) for i in range(3)])
+    assert out.mean == pytest.approx(mean, rel=1e-12)
+    rows = {r.label: r.value for r in gradient_rows(out, m)}
+    assert 7.0 * rows["a.scale"] + 3.0 * rows["b.scale"] == pytest.approx(mean, rel=1e-9)

@@ -12,13 +12,18 @@ from collections.abc import Iterator
 import jax.monitoring
 
 _TRACE_EVENT = "/jax/core/compile/jaxpr_trace_duration"
+_LOWER_EVENT = "/jax/core/compile/jaxpr_to_mlir_module_duration"
 _active: list[collections.Counter] = []
+_active_lowerings: list[collections.Counter] = []
 
 
 def _listener(event: str, duration: float, **kwargs) -> None:
     del duration
     if event == _TRACE_EVENT:
         for counter in _active:
+            counter[str(kwargs.get("fun_name", "?"))] += 1
+    elif event == _LOWER_EVENT:
+        for counter in _active_lowerings:
             counter[str(kwargs.get("fun_name", "?"))] += 1
 
 
@@ -34,3 +39,17 @@ def traces() -> Iterator[collections.Counter]:
         yield seen
     finally:
         _active.remove(seen)
+
+
+@contextlib.contextmanager
+def lowerings() -> Iterator[collections.Counter]:
+    """Program name (``jit(name)``) → lowerings of it to XLA inside the block: every program built anew (then compiled,
+    or read from the persistent cache). JAX reports a trace (`traces`) only when it starts from no other trace, so a
+    ``jax.jit`` made inside the function called and used under ``jax.jacfwd`` or ``jax.vmap`` is traced unseen; the
+    transformed program is still lowered anew on every call, and this sees it."""
+    seen: collections.Counter = collections.Counter()
+    _active_lowerings.append(seen)
+    try:
+        yield seen
+    finally:
+        _active_lowerings.remove(seen)

@@ -26,13 +26,15 @@ random turns) of the same parts is the comparison.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import operator
 from collections.abc import Mapping
+from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array
 from scipy.optimize import linear_sum_assignment
 
 from ..core.metrics import AbstractMetric, Peak
@@ -41,7 +43,7 @@ from ..core.units import TWO_PI
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
 from ..optimise.allocation_measured import MeasuredAllocation, allocate_measured
 from ..studies.montecarlo import as_key
-from .fit import Identification
+from .fit import Identification, zero_signal
 
 
 def reassemble(
@@ -93,18 +95,89 @@ class BatchAssembly:
 
 
 def _grid(drive) -> np.ndarray:
-    sig = jax.eval_shape(lambda: drive.signal(drive.zero_errors()))
+    sig = zero_signal(drive)
     revs = float(sig.hyper_period_revs)
     n = 16 * max(sig.orders) if sig.orders else 16
     return np.linspace(0.0, TWO_PI * revs, n, endpoint=False)
 
 
-def _errors(drive, parts, fixed, assign, turns, d):
-    out = dict(fixed)
-    for s, e in parts.items():
-        idx = assign[s][d]
-        out[s] = Eccentricity(e.magnitude[idx], e.phase[idx] + turns[s][d])
-    return out
+class _Batch(eqx.Module):
+    """What every unit of a batch shares, for the jitted functions below: the drive, the fixed sources' errors and the
+    measured parts of each type (name, value pairs in the order given), and how many candidate turns each part
+    tries. The functions are traced once per drive structure, shapes and `candidates`; the values are data."""
+
+    drive: AbstractSinusoidalDrive
+    fixed: tuple[tuple[str, Any], ...]
+    parts: tuple[tuple[str, Eccentricity], ...]
+    candidates: int = eqx.field(static=True)
+
+    @property
+    def grid(self) -> Array:
+        """The search's grid of input angles (rad): a constant of the traced program (it depends on the drive's structure only)."""
+        return jnp.asarray(_grid(self.drive))
+
+    @property
+    def cand(self) -> Array:
+        """The candidate turns (rad), equally spaced: a constant of the traced program."""
+        return jnp.asarray(TWO_PI * np.arange(self.candidates) / self.candidates)
+
+
+def _unit_errors(batch: _Batch, idx: Mapping[str, Array], tr: Mapping[str, Array]) -> dict:
+    """One unit's errors: the fixed sources, then each part type's parts `idx` turned by `tr` (rad)."""
+    errs = dict(batch.fixed)
+    for s, e in batch.parts:
+        errs[s] = Eccentricity(e.magnitude[idx[s]], e.phase[idx[s]] + tr[s])
+    return errs
+
+
+def _unit_peak(batch: _Batch, idx: Mapping[str, Array], tr: Mapping[str, Array]) -> Array:
+    """One unit's peak |TE| on the search grid (rad)."""
+    return jnp.max(jnp.abs(evaluate(batch.drive.signal(_unit_errors(batch, idx, tr)), batch.grid)))
+
+
+@eqx.filter_jit
+def _batch_peak(batch: _Batch, idx: dict[str, Array], tr: dict[str, Array]) -> Array:
+    """Every unit's peak on the search grid: `idx`, `tr` are source → (units, instances) part indices and turns."""
+    return jax.vmap(lambda i, t: _unit_peak(batch, i, t))(idx, tr)
+
+
+@eqx.filter_jit
+def _best_turn(batch: _Batch, idx: dict[str, Array], tr: dict[str, Array], s: str, slot: Array) -> tuple[Array, Array]:
+    """Every unit: the best of the candidate turns of its part of type `s` in the slot `slot` (one-hot over the type's
+    instances), the others held; (peak, turn) per unit."""
+
+    def at(t):
+        tr2 = dict(tr)
+        tr2[s] = tr[s] * (1 - slot) + t * slot
+        return jax.vmap(lambda i, t_: _unit_peak(batch, i, t_))(idx, tr2)
+
+    vals = jax.vmap(at)(batch.cand)  # (candidates, units)
+    k = jnp.argmin(vals, axis=0)
+    return vals[k, jnp.arange(vals.shape[1])], batch.cand[k]
+
+
+@eqx.filter_jit
+def _row_costs(
+    batch: _Batch, idx: dict[str, Array], tr: dict[str, Array], slot: dict[str, Array], d: Array, part_ids: Array
+) -> tuple[Array, Array]:
+    """Unit `d` with each part `part_ids` of the type being assigned in the slot marked by `slot` (source → boolean over
+    its instances: true at that one slot of that type, false for every other type), at each candidate turn, the others
+    held: (its best peak, that turn) per part. The type is data, not a static argument, so one trace serves every type
+    of the same count, in every round."""
+
+    def one(p, t):
+        i2 = {k: jnp.where(slot[k], p, v[d]) for k, v in idx.items()}
+        t2 = {k: jnp.where(slot[k], t, v[d]) for k, v in tr.items()}
+        return _unit_peak(batch, i2, t2)
+
+    vals = jax.vmap(lambda p: jax.vmap(lambda t: one(p, t))(batch.cand))(part_ids)
+    return jnp.min(vals, axis=1), batch.cand[jnp.argmin(vals, axis=1)]
+
+
+@eqx.filter_jit
+def _batch_metric(batch: _Batch, metric: AbstractMetric, idx: dict[str, Array], tr: dict[str, Array]) -> Array:
+    """Every unit's exact metric (rad)."""
+    return jax.vmap(lambda i, t: metric(batch.drive, batch.drive.signal(_unit_errors(batch, i, t))))(idx, tr)
 
 
 def assemble_batch(
@@ -157,35 +230,15 @@ def assemble_batch(
         for s, e in parts.items()
     }
     base = drive.zero_errors()
-    base.update({k: v for k, v in (fixed or {}).items()})
-    fixed_errs = {k: v for k, v in base.items() if k not in parts}
-    grid = jnp.asarray(_grid(drive))
-
-    def peak_of(errs):
-        return jnp.max(jnp.abs(evaluate(drive.signal(errs), grid)))
-
+    # A deviation given as a number becomes an array (as the drive takes it), so that its value is data, not a constant.
+    base.update({k: v if isinstance(v, Eccentricity) else jnp.asarray(v, dtype=float) for k, v in (fixed or {}).items()})
     names = list(parts)
-
-    def drive_peak(idx, tr):
-        errs = dict(fixed_errs)
-        for s in names:
-            errs[s] = Eccentricity(parts[s].magnitude[idx[s]], parts[s].phase[idx[s]] + tr[s])
-        return peak_of(errs)
-
-    batch_peak = jax.jit(jax.vmap(drive_peak))
-    cand = jnp.asarray(TWO_PI * np.arange(candidates) / candidates)
-
-    @functools.partial(jax.jit, static_argnums=2)
-    def best_turn(idx, tr, s, slot_onehot):
-        # every drive: the best of the candidate turns of its part in this slot, others held
-        def at(t):
-            tr2 = dict(tr)
-            tr2[s] = tr[s] * (1 - slot_onehot) + t * slot_onehot
-            return jax.vmap(drive_peak)(idx, tr2)
-
-        vals = jax.vmap(at)(cand)  # (candidates, drives)
-        k = jnp.argmin(vals, axis=0)
-        return vals[k, jnp.arange(vals.shape[1])], cand[k]
+    batch = _Batch(
+        drive=drive,
+        fixed=tuple((k, v) for k, v in base.items() if k not in parts),
+        parts=tuple((s, parts[s]) for s in names),
+        candidates=int(candidates),
+    )
 
     rng = np.random.default_rng(int(np.asarray(jax.random.randint(as_key(key), (), 0, 2**31 - 1))))
     assign = {s: rng.permutation(n_drives * counts[s]).reshape(n_drives, counts[s]) for s in names}
@@ -198,59 +251,48 @@ def assemble_batch(
             for s in names:
                 for j in range(counts[s]):
                     oh = jnp.zeros(counts[s]).at[j].set(1.0)
-                    _, t = best_turn(idx, tr, s, oh)
+                    _, t = _best_turn(batch, idx, tr, s, oh)
                     tr[s] = tr[s].at[:, j].set(t)
-        return {s: np.array(tr[s]) for s in names}, np.array(batch_peak(idx, tr))
+        return {s: np.array(tr[s]) for s in names}, np.array(_batch_peak(batch, idx, tr))
 
     turns, vals = optimise_turns(assign, turns, sweeps=1)
     start_assign, start_turns = {s: a.copy() for s, a in assign.items()}, turns
     worst = float(vals.max())
     for _ in range(rounds):
         for s in names:
-            cand_assign, cand_turns = _assign_type(drive_peak, parts, names, counts, assign, turns, s, cand)
+            cand_assign, cand_turns = _assign_type(batch, names, assign, turns, s)
             t2, v2 = optimise_turns(cand_assign, cand_turns, sweeps=1)
             if v2.max() < worst:
                 assign, turns, worst, vals = cand_assign, t2, float(v2.max()), v2
     assign, turns, vals = _swap_worst(assign, turns, vals, names, counts, optimise_turns)
     turns, vals = optimise_turns(assign, turns, sweeps=2)
 
-    def exact(idx, tr):
-        errs = dict(fixed_errs)
-        for s in names:
-            errs[s] = Eccentricity(parts[s].magnitude[idx[s]], parts[s].phase[idx[s]] + tr[s])
-        return metric(drive, drive.signal(errs))
+    def exact_b(a, t):
+        return np.asarray(_batch_metric(batch, metric, {s: jnp.asarray(a[s]) for s in names}, {s: jnp.asarray(t[s]) for s in names}))
 
-    exact_b = jax.jit(jax.vmap(exact))
-    te = np.asarray(exact_b({s: jnp.asarray(assign[s]) for s in names}, {s: jnp.asarray(turns[s]) for s in names}))
-    _, matched_turns = None, optimise_turns(start_assign, start_turns, sweeps=2)[0]
-    matched = np.asarray(exact_b({s: jnp.asarray(start_assign[s]) for s in names}, {s: jnp.asarray(matched_turns[s]) for s in names}))
+    te = exact_b(assign, turns)
+    matched_turns = optimise_turns(start_assign, start_turns, sweeps=2)[0]
+    matched = exact_b(start_assign, matched_turns)
     rand = []
     for _ in range(random_batches):
         ra = {s: rng.permutation(n_drives * counts[s]).reshape(n_drives, counts[s]) for s in names}
         rt = {s: rng.uniform(0.0, TWO_PI, (n_drives, counts[s])) for s in names}
-        rand.append(np.asarray(exact_b({s: jnp.asarray(ra[s]) for s in names}, {s: jnp.asarray(rt[s]) for s in names})))
+        rand.append(exact_b(ra, rt))
     rand = np.stack(rand)
     return BatchAssembly(assignment=assign, turns=turns, te=te, random_te=rand, random_worst=rand.max(axis=1), random_matched_te=matched)
 
 
-def _assign_type(drive_peak, parts, names, counts, assign, turns, s, cand):
+def _assign_type(batch: _Batch, names: list[str], assign: dict, turns: dict, s: str) -> tuple[dict, dict]:
     """One assignment step for part type `s`: costs of every part in every (drive, slot), others held."""
     n_drives, c = assign[s].shape
     n_parts = n_drives * c
     idx = {k: jnp.asarray(assign[k]) for k in names}
     tr = {k: jnp.asarray(turns[k]) for k in names}
+    part_ids = jnp.arange(n_parts)
 
-    @jax.jit
     def row_costs(d, j):
-        def one(p, t):
-            i2 = {k: v[d] for k, v in idx.items()}
-            t2 = {k: v[d] for k, v in tr.items()}
-            i2[s] = i2[s].at[j].set(p)
-            t2[s] = t2[s].at[j].set(t)
-            return drive_peak(i2, t2)
-
-        vals = jax.vmap(lambda p: jax.vmap(lambda t: one(p, t))(cand))(jnp.arange(n_parts))
-        return jnp.min(vals, axis=1), cand[jnp.argmin(vals, axis=1)]
+        slot = {k: jnp.asarray((np.arange(assign[k].shape[1]) == j) & (k == s)) for k in names}
+        return _row_costs(batch, idx, tr, slot, jnp.asarray(d), part_ids)
 
     costs = np.zeros((n_parts, n_parts))
     best_t = np.zeros((n_parts, n_parts))

@@ -40,6 +40,7 @@ import optimistix as optx
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..core.precision import require_x64
+from ..core.signal import TESignal
 from ..core.solution import RESULTS, check
 from ..core.units import TWO_PI
 from ..drives.protocol import AbstractGridDrive, AbstractSinusoidalDrive, Eccentricity, Errors
@@ -269,6 +270,30 @@ def _basis(theta: np.ndarray, orders, f0: float) -> np.ndarray:
 
 
 @eqx.filter_jit
+def zero_signal(drive: AbstractSinusoidalDrive) -> TESignal:
+    """The drive's TE signal with every source at zero: its orders and fundamental, the layout of all its signals
+    (jitted at module level: traced once per drive structure, not on every call)."""
+    return drive.signal(drive.zero_errors())
+
+
+@eqx.filter_jit
+def _record_coefficients(
+    drive: AbstractSinusoidalDrive, instances: tuple[Instance, ...], p_full: Array, turned: tuple[tuple[str, ...], ...], values: list[Array]
+) -> Array:
+    """The TE signal's coefficients (records × (1 + 2K), rad) for the full parameter vector `p_full`, in record r's
+    assembly the sources ``turned[r]`` turned by ``values[r]`` (rad); jitted once per drive structure and turned sources."""
+    return jnp.stack([signal_coefficients(drive, errors_from(drive, instances, p_full, dict(zip(t, v)))) for t, v in zip(turned, values)])
+
+
+@eqx.filter_jit
+def _record_coefficients_jacobian(
+    drive: AbstractSinusoidalDrive, instances: tuple[Instance, ...], p_full: Array, turned: tuple[tuple[str, ...], ...], values: list[Array]
+) -> Array:
+    """∂ `_record_coefficients` / ∂ `p_full` (records × (1 + 2K) × parameters), forward mode."""
+    return jax.jacfwd(lambda p: _record_coefficients(drive, instances, p, turned, values))(p_full)
+
+
+@eqx.filter_jit
 def _residual_jit(problem: IdentificationProblem, y: Array, z: list[Array]) -> Array:
     return problem._residual_body(y, z)
 
@@ -316,22 +341,17 @@ def identification_problem(
         [np.r_[np.cos(a), np.sin(a)] if w == 2 else np.r_[1.0] for a, w in zip(rng.uniform(0, TWO_PI, len(width)), width)]
     )
 
-    @jax.jit
-    def coefs(p, turn_values):
-        return jnp.stack(
-            [signal_coefficients(drive, errors_from(drive, instances, p, dict(zip(t, v)))) for t, v in zip(turn_list, turn_values)]
-        )
-
+    turned = tuple(tuple(t) for t in turn_list)
     tv = [jnp.asarray(list(t.values()), dtype=float) for t in turn_list]
     # Identifiability from the model's Jacobian in coefficient space (exact: no record length enters).
-    jac3 = np.asarray(jax.jacfwd(coefs)(jnp.asarray(probe), tv))  # (records, 1 + 2K, params)
+    jac3 = np.asarray(_record_coefficients_jacobian(drive, tuple(instances), jnp.asarray(probe), turned, tv))  # (records, 1 + 2K, params)
     m = jac3.shape[1]
     jac = jac3.reshape(-1, jac3.shape[2])
     offs = np.zeros((jac.shape[0], len(recs)))
     for r in range(len(recs)):
         offs[r * m, r] = 1.0
     kept, status = select(jac, offs, starts_of)
-    sig = jax.eval_shape(lambda: drive.signal(drive.zero_errors()))
+    sig = zero_signal(drive)
     freq_of_row = [Fraction(0)] + [k * sig.fundamental for k in sig.orders] * 2
     used = np.abs(jac3[0]) > 1e-9 * np.abs(jac3).max()
     freqs = tuple(
@@ -340,6 +360,10 @@ def identification_problem(
     )
     found = groups(instances, freqs, jac, offs, starts_of, kept, status, len(recs))
     _check_records(recs, sorted({f for i in kept for f in freqs[i]} | {Fraction(0)}))
+
+    def coefs(p: Array, values: list[Array]) -> Array:
+        return _record_coefficients(drive, tuple(instances), p, turned, values)
+
     periods = tuple(period(coefs, tv, instances, i, probe, starts_of) for i in range(len(instances)))
     qs, rs = [], []
     for rec in recs:

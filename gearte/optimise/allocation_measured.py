@@ -5,6 +5,7 @@ turns (any angle, or whole teeth / bolt positions, certified by enumeration) tha
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 
@@ -55,6 +56,21 @@ def _with_phases(errors: Mapping[str, Eccentricity], names: list[str], counts: l
         )
         i += c
     return out
+
+
+@eqx.filter_jit
+def _metric_at(
+    drive: AbstractSinusoidalDrive,
+    metric: AbstractMetric,
+    errors: tuple[tuple[str, Eccentricity], ...],
+    names: tuple[str, ...],
+    counts: tuple[int, ...],
+    ys: Float[Array, "n dim"],
+) -> Float[Array, " n"]:
+    """The exact metric (rad) with the `names` sources' phases at each row of `ys` (`counts` entries each), the other
+    errors as in `errors` (name, value pairs in the drive's order); traced once per drive structure and shapes."""
+    errs = dict(errors)
+    return jax.vmap(lambda y: metric(drive, drive.signal(_with_phases(errs, list(names), list(counts), y))))(ys)
 
 
 def allocate_measured(
@@ -130,7 +146,8 @@ def allocate_measured(
     steps = [adjust[n] for n in names for _ in range(counts_all[n])]
     enumerated = False
     if any(s is not None for s in steps):
-        y_best, te_best, enumerated = _discrete(exact, y_best, y_given, steps, enumerate_limit)
+        many = functools.partial(_metric_at, drive, metric, tuple(errors.items()), tuple(names), tuple(counts))
+        y_best, te_best, enumerated = _discrete(exact, many, y_best, y_given, steps, enumerate_limit)
     phases, i = {}, 0
     for n, c in zip(names, counts):
         phases[n] = jnp.mod(y_best[i : i + c], _TWO_PI) if c > 1 else jnp.mod(y_best[i], _TWO_PI)
@@ -149,9 +166,9 @@ def allocate_measured(
     )
 
 
-def _discrete(exact, y_cont, y_given, steps, limit):
+def _discrete(exact, many, y_cont, y_given, steps, limit):
     """Snap to allowed positions (the given phase turned by whole steps); enumerate all of them
-    when few enough, else search neighbours."""
+    when few enough (`many`: the metric at each row of phases), else search neighbours (`exact`: at one)."""
     grids = []
     for y, y0, s in zip(np.asarray(y_cont), np.asarray(y_given), steps):
         if s is None:
@@ -160,10 +177,9 @@ def _discrete(exact, y_cont, y_given, steps, limit):
             n = max(1, int(round(_TWO_PI / s)))
             grids.append(y0 + np.arange(n) * (_TWO_PI / n))
     total = int(np.prod([len(g) for g in grids]))
-    f = jax.jit(jax.vmap(exact))
     if total <= limit:
         mesh = np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, len(grids))
-        vals = np.concatenate([np.asarray(f(jnp.asarray(mesh[i : i + 4096]))) for i in range(0, total, 4096)])
+        vals = np.concatenate([np.asarray(many(jnp.asarray(mesh[i : i + 4096]))) for i in range(0, total, 4096)])
         i = int(np.argmin(vals))
         return jnp.asarray(mesh[i]), jnp.asarray(vals[i]), True
     # Too many combinations: round, then coordinate descent over neighbouring positions.

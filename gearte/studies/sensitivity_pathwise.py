@@ -22,7 +22,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import PRNGKeyArray
+from jaxtyping import Array, Float, PRNGKeyArray, UInt
 
 from ..core.metrics import AbstractMetric
 from ..core.precision import require_x64
@@ -47,6 +47,32 @@ class PathwiseSensitivity(eqx.Module):
     mean: float
     gradient: ErrorModel
     n_samples: int = eqx.field(static=True)
+
+
+@eqx.filter_jit
+def _chunk_grad(
+    drive: AbstractDrive,
+    metrics: tuple[AbstractMetric, ...],
+    static: ErrorModel,
+    key: PRNGKeyArray,
+    params: ErrorModel,
+    idx: UInt[Array, " chunk"],
+    weight: Float[Array, " chunk"],
+) -> tuple[Float[Array, " metrics"], ErrorModel]:
+    """Sums over a chunk of samples `idx` (sample i drawn with ``fold_in(key, i)``, weighted by `weight`) of the
+    metrics' smooth values and of their gradients with respect to the law parameters `params` (the model's inexact
+    arrays; `static`: the rest of it). Traced once per drive, metrics, model structure and chunk size."""
+
+    def per(i, wt):
+        def f(pp):
+            errors = eqx.combine(pp, static).sample(jax.random.fold_in(key, i))
+            r = drive.response(errors)
+            return wt * jnp.stack([m.smooth(drive, r) for m in metrics])
+
+        return f(params), jax.jacrev(f)(params)
+
+    vals, grads = jax.vmap(per)(idx, weight)
+    return jnp.sum(vals, axis=0), jax.tree.map(lambda g: jnp.sum(g, axis=0), grads)
 
 
 def pathwise_sensitivities(
@@ -87,25 +113,12 @@ def pathwise_sensitivities(
     k0 = as_key(key)
     params, static = eqx.partition(model, eqx.is_inexact_array)
 
-    @eqx.filter_jit
-    def chunk_grad(p, idx, weight):
-        def per(i, wt):
-            def f(pp):
-                errors = eqx.combine(pp, static).sample(jax.random.fold_in(k0, i))
-                r = drive.response(errors)
-                return wt * jnp.stack([m.smooth(drive, r) for m in metrics])
-
-            return f(p), jax.jacrev(f)(p)
-
-        vals, grads = jax.vmap(per)(idx, weight)
-        return jnp.sum(vals, axis=0), jax.tree.map(lambda g: jnp.sum(g, axis=0), grads)
-
     total, gsum = None, None
     for start in range(0, int(n_samples), chunk):
         # Every chunk has the same shape (one compilation); samples past n_samples get weight 0.
         idx = jnp.arange(start, start + chunk, dtype=jnp.uint32)
         weight = (idx < n_samples).astype(float)
-        v, g = chunk_grad(params, idx, weight)
+        v, g = _chunk_grad(drive, metrics, static, k0, params, idx, weight)
         total = v if total is None else total + v
         gsum = g if gsum is None else jax.tree.map(jnp.add, gsum, g)
     assert total is not None and gsum is not None
