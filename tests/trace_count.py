@@ -32,7 +32,8 @@ jax.monitoring.register_event_duration_secs_listener(_listener)
 
 @contextlib.contextmanager
 def traces() -> Iterator[collections.Counter]:
-    """Function name → traces of it inside the block (nested traces included)."""
+    """Function name → traces of it inside the block: the traces JAX reports, those begun from no other trace (a
+    function traced inside another's trace, e.g. under ``jax.jacfwd``, is not seen: `lowerings` sees its program)."""
     seen: collections.Counter = collections.Counter()
     _active.append(seen)
     try:

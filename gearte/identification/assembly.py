@@ -256,7 +256,9 @@ def assemble_batch(
         return {s: np.array(tr[s]) for s in names}, np.array(_batch_peak(batch, idx, tr))
 
     turns, vals = optimise_turns(assign, turns, sweeps=1)
-    start_assign, start_turns = {s: a.copy() for s, a in assign.items()}, turns
+    # Copies: `_swap_worst` changes the arrays of `assign` and `turns` in place, and the matched baseline below starts
+    # from the assignment and turns as they were here.
+    start_assign, start_turns = {s: a.copy() for s, a in assign.items()}, {s: t.copy() for s, t in turns.items()}
     worst = float(vals.max())
     for _ in range(rounds):
         for s in names:
