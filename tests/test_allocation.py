@@ -10,7 +10,7 @@ import numpy as np
 import optimistix as optx
 import pytest
 from helpers import reference_extrema
-from trace_count import traces
+from trace_count import lowerings, traces
 
 import gearte
 from gearte import ConfigError, allocate_measured, allocate_rule, cli, expected, rule_problem, worst_case
@@ -98,15 +98,16 @@ def test_discrete_positions_are_turns_from_the_delivered_phase():
 
 def test_a_second_allocation_of_the_same_drive_traces_nothing():
     """`allocate_measured` twice on one drive with other measured errors, at discrete positions (enumerated): the
-    second call traces nothing (the enumeration's metric is jitted once at module level, the errors being data) and
-    finds the second parts' own optimum, |5 e^{2i} + 2.5 e^{i(0.4 + kπ/6)}| at the best k (one line: the peak is the
-    modulus of the phasor sum)."""
+    second call traces nothing and builds no program (the optimiser, with the unit's smoothing width as data, and the
+    enumeration's metric are jitted once at module level, the errors being data) and finds the second parts' own
+    optimum, |5 e^{2i} + 2.5 e^{i(0.4 + kπ/6)}| at the best k (one line: the peak is the modulus of the phasor sum)."""
     d = explicit(("a", 1, 0.0), ("b", 1, 0.0))
     adjust = {"b": 2 * math.pi / 12}
     allocate_measured(d, {"a": gearte.Eccentricity(3.0, 0.3), "b": gearte.Eccentricity(4.0, 1.0)}, adjust=adjust, key=0, starts=2)
-    with traces() as seen:
+    with traces() as seen, lowerings() as built:
         r = allocate_measured(d, {"a": gearte.Eccentricity(5.0, 2.0), "b": gearte.Eccentricity(2.5, 0.4)}, adjust=adjust, key=1, starts=2)
     assert not seen, dict(seen)
+    assert not built, dict(built)
     assert r.enumerated
     best = min(abs(5.0 * np.exp(2.0j) + 2.5 * np.exp(1j * (0.4 + k * math.pi / 6))) for k in range(12))
     np.testing.assert_allclose(float(r.te) / GAIN, best, rtol=1e-9)

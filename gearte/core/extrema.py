@@ -374,7 +374,7 @@ def spectrum(signal: TESignal) -> Spectrum:
     return Spectrum(amplitude=amp, phase=phase, offset=signal.offset, freq=signal.frequencies)
 
 
-def smooth_peak(signal: TESignal, *, width: float, oversample: int = 16) -> Float[Array, "*batch"]:
+def smooth_peak(signal: TESignal, *, width: float | Float[Array, ""], oversample: int = 16) -> Float[Array, "*batch"]:
     """Smooth upper bound of the peak |TE| for optimisers (rad).
 
     ``width · log Σ_grid (e^{TE/width} + e^{−TE/width})`` over the hyper-period grid:
@@ -383,10 +383,11 @@ def smooth_peak(signal: TESignal, *, width: float, oversample: int = 16) -> Floa
 
     **Arguments:**
 
-    - `width`: smoothing width, rad (e.g. 1 % of the expected peak).
+    - `width`: smoothing width, rad (e.g. 1 % of the expected peak); a number, or a traced value (checked > 0 only
+      where it is a number).
     - `oversample`: grid points per period of the highest order.
     """
-    if not width > 0:
+    if not isinstance(width, jax.core.Tracer) and not width > 0:
         raise ValueError(f"smooth_peak: width must be > 0 rad, got {width}")
     if not signal.orders:
         return width * jnp.logaddexp(signal.offset / width, -signal.offset / width)

@@ -73,6 +73,39 @@ def _metric_at(
     return jax.vmap(lambda y: metric(drive, drive.signal(_with_phases(errs, list(names), list(counts), y))))(ys)
 
 
+@eqx.filter_jit
+def _optimise(
+    drive: AbstractSinusoidalDrive,
+    metric: AbstractMetric,
+    errors: tuple[tuple[str, Eccentricity], ...],
+    names: tuple[str, ...],
+    counts: tuple[int, ...],
+    y0: Float[Array, "starts dim"],
+    width: Float[Array, ""],
+    max_steps: int,
+) -> tuple[Float[Array, "starts dim"], RESULTS, Float[Array, " starts"]]:
+    """BFGS on the smooth surrogate of `metric` (width `width`, rad) from every row of `y0`: the ends, their result
+    codes and the exact metric at each end. Module level, with the unit's values (errors, starts, width) as arguments:
+    another unit of the same drive structure and shapes traces and compiles nothing."""
+    errs = dict(errors)
+
+    def signal(y):
+        return drive.signal(_with_phases(errs, list(names), list(counts), y))
+
+    def surrogate(y, args):
+        del args
+        sig = signal(y)
+        if isinstance(metric, Peak):
+            return smooth_peak(sig, width=width) / width
+        # Peak-to-peak: smooth max of f plus smooth max of −f.
+        pos = smooth_peak(eqx.tree_at(lambda s: s.offset, sig, sig.offset + 1e3 * width), width=width)
+        return (pos - 1e3 * width + smooth_peak(sig, width=width)) / width
+
+    solver = optx.BFGS(rtol=1e-8, atol=1e-8)
+    sol = jax.vmap(lambda s: optx.minimise(surrogate, solver, s, None, max_steps=max_steps, throw=False))(y0)
+    return sol.value, sol.result, jax.vmap(lambda y: metric(drive, signal(y)))(sol.value)
+
+
 def allocate_measured(
     drive: AbstractSinusoidalDrive,
     errors: Mapping[str, Eccentricity],
@@ -127,21 +160,11 @@ def allocate_measured(
     te_before = exact(y_given)
     w = float(width) if width is not None else 2e-3 * max(float(te_before), 1e-12)
 
-    def surrogate(y, args):
-        sig = drive.signal(_with_phases(errors, names, counts, y))
-        if isinstance(metric, Peak):
-            return smooth_peak(sig, width=w) / w
-        # Peak-to-peak: smooth max of f plus smooth max of −f.
-        pos = smooth_peak(eqx.tree_at(lambda s: s.offset, sig, sig.offset + 1e3 * w), width=w)
-        return (pos - 1e3 * w + smooth_peak(sig, width=w)) / w
-
     y0 = _TWO_PI * jax.random.uniform(as_key(key), (starts, dim), dtype=float)
     y0 = y0.at[0].set(y_given)
-    solver = optx.BFGS(rtol=1e-8, atol=1e-8)
-    sol = jax.vmap(lambda s: optx.minimise(surrogate, solver, s, None, max_steps=max_steps, throw=False))(y0)
-    values = jax.vmap(exact)(sol.value)
-    best = best_start(values, sol.result)
-    y_best, te_best = sol.value[best], values[best]
+    ends, results, values = _optimise(drive, metric, tuple(errors.items()), tuple(names), tuple(counts), y0, jnp.asarray(w), max_steps)
+    best = best_start(values, results)
+    y_best, te_best = ends[best], values[best]
 
     steps = [adjust[n] for n in names for _ in range(counts_all[n])]
     enumerated = False
@@ -152,7 +175,7 @@ def allocate_measured(
     for n, c in zip(names, counts):
         phases[n] = jnp.mod(y_best[i : i + c], _TWO_PI) if c > 1 else jnp.mod(y_best[i], _TWO_PI)
         i += c
-    converged, result = starts_result(sol.result, best)
+    converged, result = starts_result(results, best)
     check(result, throw=throw and not partial_success(result), what="allocate_measured")
     return MeasuredAllocation(
         phases=phases,
