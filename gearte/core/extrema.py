@@ -387,7 +387,11 @@ def smooth_peak(signal: TESignal, *, width: float | Float[Array, ""], oversample
       where it is a number).
     - `oversample`: grid points per period of the highest order.
     """
-    if not isinstance(width, jax.core.Tracer) and not width > 0:
+    try:
+        refused = not width > 0
+    except jax.errors.TracerBoolConversionError:  # a traced width: the caller's to check
+        refused = False
+    if refused:
         raise ValueError(f"smooth_peak: width must be > 0 rad, got {width}")
     if not signal.orders:
         return width * jnp.logaddexp(signal.offset / width, -signal.offset / width)

@@ -83,7 +83,7 @@ def _optimise(
     y0: Float[Array, "starts dim"],
     width: Float[Array, ""],
     max_steps: int,
-) -> tuple[Float[Array, "starts dim"], RESULTS, Float[Array, " starts"]]:
+) -> tuple[Float[Array, "starts dim"], optx.RESULTS, Float[Array, " starts"]]:
     """BFGS on the smooth surrogate of `metric` (width `width`, rad) from every row of `y0`: the ends, their result
     codes and the exact metric at each end. Module level, with the unit's values (errors, starts, width) as arguments:
     another unit of the same drive structure and shapes traces and compiles nothing."""
