@@ -120,6 +120,23 @@ def seed_problem():
     return rule_problem(s.drive, s.errors, adjust=a.adjust, datum=a.datum, tolerances=s.tolerances)
 
 
+def test_a_second_rule_allocation_of_the_same_problem_builds_no_program(seed_problem):
+    """`allocate_rule` again with another key (other starts and common random numbers) and another smoothing width:
+    the surrogate's optimiser is jitted once at module level (the width and the samples are data), so nothing is
+    traced or lowered; the figures are those of the returned offsets (the worst case by its closed form), and the
+    second call repeated gives the same numbers to the bit."""
+    kw = dict(objective=gearte.Expected(), starts=2, n_samples=64, n_check=2000, throw=False)
+    allocate_rule(seed_problem, key=1, **kw)
+    with traces() as seen, lowerings() as built:
+        r = allocate_rule(seed_problem, key=2, width=2e-7, **kw)
+    assert not seen and not built, (dict(seen), dict(built))
+    off = jnp.asarray([r.offsets[n] for n in seed_problem.adjust])
+    np.testing.assert_allclose(float(r.worst_case), float(worst_case(seed_problem, off)), rtol=1e-12)
+    again = allocate_rule(seed_problem, key=2, width=2e-7, **kw)
+    assert {n: float(v) for n, v in again.offsets.items()} == {n: float(v) for n, v in r.offsets.items()}
+    assert (float(again.expected), again.converged) == (float(r.expected), r.converged)
+
+
 def test_seed_rule_worst_case_is_the_papers_131_5(seed_problem):
     seed = {"sun_assembly": 7 * math.pi / 9, "carrier_assembly": 8 * math.pi / 9, "planet_assembly": 0.0}
     off = jnp.asarray([seed[n] for n in seed_problem.adjust])

@@ -240,7 +240,7 @@ def worst_case(p: RuleProblem, offsets: Array, *, metric: AbstractMetric = Peak(
     return jnp.asarray(sum(metric(p.drive, sig) for _, sig in _group_parts(p, jnp.asarray(offsets, dtype=float), group)))
 
 
-def _smooth_worst_case(p: RuleProblem, offsets: Array, group: np.ndarray, width: float) -> Array:
+def _smooth_worst_case(p: RuleProblem, offsets: Array, group: np.ndarray, width: float | Array) -> Array:
     total = 0.0
     for g, sig in _group_parts(p, offsets, group):
         if g < 0:
@@ -377,6 +377,36 @@ def evaluate_rule(
     }
 
 
+@eqx.filter_jit
+def _optimise_rule(
+    p: RuleProblem,
+    objective: str,
+    group: tuple[int, ...],
+    beta: Array,
+    mags: dict[str, Array],
+    y0: Array,
+    width: Array,
+    max_steps: int,
+) -> tuple[Array, optx.RESULTS, Array]:
+    """BFGS on the smooth surrogate of the objective named `objective` (width `width`, rad; common random phases
+    `beta` and magnitudes `mags`) from every row of `y0`: the ends, their result codes and the surrogate at each end
+    (the worst case is scored exactly by the caller). Module level, with the values as arguments: another call of the
+    same problem structure and shapes (another key, width or tolerances) traces and compiles nothing."""
+    groups = np.asarray(group)
+
+    def surrogate(y, args):
+        del args
+        if objective == "worst_case":
+            return _smooth_worst_case(p, y, groups, width) / width
+        vals = jax.vmap(lambda b, mg: smooth_peak(p.drive.signal(p.errors(mg, b, y)), width=width))(beta, mags)
+        return jnp.mean(vals) / width
+
+    solver = optx.BFGS(rtol=1e-9, atol=1e-9)
+    sol = jax.vmap(lambda s: optx.minimise(surrogate, solver, s, None, max_steps=max_steps, throw=False))(y0)
+    scores = jnp.zeros(y0.shape[0]) if objective == "worst_case" else jax.vmap(lambda y: surrogate(y, None))(sol.value)
+    return sol.value, sol.result, scores
+
+
 def allocate_rule(
     p: RuleProblem,
     *,
@@ -418,23 +448,14 @@ def allocate_rule(
     w = float(width) if width is not None else 2e-3 * max(scale, 1e-12)
     beta, mags = _samples(p, k_crn, n_samples, robust=(objective == "robust"))
 
-    def surrogate(y, args):
-        if objective == "worst_case":
-            return _smooth_worst_case(p, y, group, w) / w
-        vals = jax.vmap(lambda b, mg: smooth_peak(p.drive.signal(p.errors(mg, b, y)), width=w))(beta, mags)
-        return jnp.mean(vals) / w
-
     y0 = _TWO_PI * jax.random.uniform(k_start, (starts, m), dtype=float)
-    solver = optx.BFGS(rtol=1e-9, atol=1e-9)
-    sol = jax.vmap(lambda s: optx.minimise(surrogate, solver, s, None, max_steps=max_steps, throw=False))(y0)
+    ends, results, scores = _optimise_rule(p, objective, tuple(int(g) for g in group), beta, mags, y0, jnp.asarray(w), max_steps)
     if objective == "worst_case":
-        scores = jnp.stack([worst_case(p, y) for y in sol.value])
-    else:
-        scores = jax.vmap(lambda y: surrogate(y, None))(sol.value)
-    best = best_start(scores, sol.result)
-    y_best = jnp.mod(sol.value[best], _TWO_PI)
+        scores = jnp.stack([worst_case(p, y) for y in ends])
+    best = best_start(scores, results)
+    y_best = jnp.mod(ends[best], _TWO_PI)
     figures = evaluate_rule(p, y_best, key=k_check, n_check=n_check)
-    converged, result = starts_result(sol.result, best)
+    converged, result = starts_result(results, best)
     # The surrogate is smooth but flat along valleys: a start that stops there is still scored exactly.
     check(result, throw=throw and not partial_success(result), what="allocate_rule")
     return RuleAllocation(
