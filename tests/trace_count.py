@@ -13,44 +13,38 @@ import jax.monitoring
 
 _TRACE_EVENT = "/jax/core/compile/jaxpr_trace_duration"
 _LOWER_EVENT = "/jax/core/compile/jaxpr_to_mlir_module_duration"
-_active: list[collections.Counter] = []
-_active_lowerings: list[collections.Counter] = []
+#: Event → the counters open for it (one per `with` block).
+_open: dict[str, list[collections.Counter]] = {_TRACE_EVENT: [], _LOWER_EVENT: []}
 
 
 def _listener(event: str, duration: float, **kwargs) -> None:
     del duration
-    if event == _TRACE_EVENT:
-        for counter in _active:
-            counter[str(kwargs.get("fun_name", "?"))] += 1
-    elif event == _LOWER_EVENT:
-        for counter in _active_lowerings:
-            counter[str(kwargs.get("fun_name", "?"))] += 1
+    for counter in _open.get(event, ()):
+        counter[str(kwargs.get("fun_name", "?"))] += 1
 
 
 jax.monitoring.register_event_duration_secs_listener(_listener)
 
 
 @contextlib.contextmanager
-def traces() -> Iterator[collections.Counter]:
-    """Function name → traces of it inside the block: the traces JAX reports, those begun from no other trace (a
-    function traced inside another's trace, e.g. under ``jax.jacfwd``, is not seen: `lowerings` sees its program)."""
+def _counting(event: str) -> Iterator[collections.Counter]:
     seen: collections.Counter = collections.Counter()
-    _active.append(seen)
+    _open[event].append(seen)
     try:
         yield seen
     finally:
-        _active.remove(seen)
+        _open[event].remove(seen)
 
 
-@contextlib.contextmanager
-def lowerings() -> Iterator[collections.Counter]:
+def traces() -> contextlib.AbstractContextManager[collections.Counter]:
+    """Function name → traces of it inside the block: the traces JAX reports, those begun from no other trace (a
+    function traced inside another's trace, e.g. under ``jax.jacfwd``, is not seen: `lowerings` sees its program)."""
+    return _counting(_TRACE_EVENT)
+
+
+def lowerings() -> contextlib.AbstractContextManager[collections.Counter]:
     """Program name (``jit(name)``) → lowerings of it to XLA inside the block: every program built anew (then compiled,
     or read from the persistent cache). JAX reports a trace (`traces`) only when it starts from no other trace, so a
     ``jax.jit`` made inside the function called and used under ``jax.jacfwd`` or ``jax.vmap`` is traced unseen; the
     transformed program is still lowered anew on every call, and this sees it."""
-    seen: collections.Counter = collections.Counter()
-    _active_lowerings.append(seen)
-    try:
-        yield seen
-    finally:
-        _active_lowerings.remove(seen)
+    return _counting(_LOWER_EVENT)

@@ -391,3 +391,10 @@ def _signal_and_extrema(drive: AbstractSinusoidalDrive, errors: Errors) -> tuple
 
 
 _evaluate_jit = eqx.filter_jit(evaluate)
+
+
+@eqx.filter_jit
+def zero_signal(drive: AbstractSinusoidalDrive) -> TESignal:
+    """The drive's TE signal with every source at zero: its orders and fundamental, the layout of all its signals
+    (jitted at module level: traced once per drive structure, not on every call)."""
+    return drive.signal(drive.zero_errors())

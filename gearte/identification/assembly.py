@@ -40,10 +40,10 @@ from scipy.optimize import linear_sum_assignment
 from ..core.metrics import AbstractMetric, Peak
 from ..core.signal import evaluate
 from ..core.units import TWO_PI
-from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
+from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity, zero_signal
 from ..optimise.allocation_measured import MeasuredAllocation, allocate_measured
 from ..studies.montecarlo import as_key
-from .fit import Identification, zero_signal
+from .fit import Identification
 
 
 def reassemble(

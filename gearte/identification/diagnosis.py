@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core.records import spectral_lines
+from ..drives.protocol import zero_signal
 from .fit import Identification, IdentificationProblem, _basis, signal_coefficients
 from .records import MeasuredRecord
 
@@ -50,7 +51,7 @@ class Diagnosis:
 def diagnose(problem: IdentificationProblem, solution: Identification, record: MeasuredRecord, *, lines: int = 8) -> Diagnosis:
     """Map the lines of `record` (the first record identified) to the parts, with the identified share of each."""
     drive = problem.drive
-    sig = drive.signal(drive.zero_errors())
+    sig = zero_signal(drive)
     orders, f0 = sig.orders, sig.fundamental
     theta = np.asarray(record.theta, dtype=np.float64)
     te = np.asarray(record.te, dtype=np.float64)

@@ -40,10 +40,9 @@ import optimistix as optx
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..core.precision import require_x64
-from ..core.signal import TESignal
 from ..core.solution import RESULTS, check
 from ..core.units import TWO_PI
-from ..drives.protocol import AbstractGridDrive, AbstractSinusoidalDrive, Eccentricity, Errors
+from ..drives.protocol import AbstractGridDrive, AbstractSinusoidalDrive, Eccentricity, Errors, zero_signal
 from ..studies.montecarlo import as_key
 from .identifiability import Group, Instance, groups, period, select
 from .records import MeasuredRecord, RecordError
@@ -267,13 +266,6 @@ def _basis(theta: np.ndarray, orders, f0: float) -> np.ndarray:
     """Columns [1, cos(k f₀ θ)…, sin(k f₀ θ)…] on a record's input angles: the model is B · coefficients."""
     arg = np.outer(theta * f0, np.asarray(orders, dtype=np.float64))
     return np.concatenate([np.ones((len(theta), 1)), np.cos(arg), np.sin(arg)], axis=1)
-
-
-@eqx.filter_jit
-def zero_signal(drive: AbstractSinusoidalDrive) -> TESignal:
-    """The drive's TE signal with every source at zero: its orders and fundamental, the layout of all its signals
-    (jitted at module level: traced once per drive structure, not on every call)."""
-    return drive.signal(drive.zero_errors())
 
 
 @eqx.filter_jit
