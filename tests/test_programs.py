@@ -312,3 +312,31 @@ def test_a_program_that_refuses_its_inputs_is_dropped_for_good(store_at, tmp_pat
     # From then on the usual compilation answers at once: nothing compiled or kept again for that key.
     np.testing.assert_array_equal(programs.kept_program("refusal_test", body, x, fallback=fallback)(x), 2.0 * np.arange(3.0))
     assert calls == [1, 1] and store.saved == 1 and key not in store._memory
+
+
+def test_a_repeat_run_loads_the_sensitivities_and_the_unit_s_trace(store_at):
+    # `gearte run` computes the sensitivities (`pathwise_sensitivities`) and the TE trace of a unit
+    # (`drive.trace`) as well as the Monte Carlo: the next process loads their programs too, tracing nothing.
+    from trace_count import traces
+
+    s = load_study("examples/planetary_wang2013_random.toml")
+    errors = s.errors.sample(jax.random.key(7))
+
+    def run():
+        sens = gearte.pathwise_sensitivities(s.drive, s.errors, s.metric, key=3, n_samples=6, chunk=3)[s.metric.name]
+        return [sens.mean, *jax.tree.leaves(sens.gradient)], s.drive.trace(errors)
+
+    programs.disable_program_store()
+    (grads, trace) = run()
+    store = store_at()
+    run()
+    assert store.saved == 2
+    programs._STORE[0] = None
+    fresh = store_at()
+    with traces() as seen:
+        (grads_loaded, trace_loaded) = run()
+    assert fresh.loaded == 2 and fresh.saved == 0
+    assert seen["_chunk_grad"] == 0 and seen["_signal_and_extrema"] == 0, seen
+    for a, b in zip(grads, grads_loaded, strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    np.testing.assert_array_equal(trace.te, trace_loaded.te)

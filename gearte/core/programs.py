@@ -18,8 +18,9 @@ against the model. It covers:
   devices) of every array leaf (array *values* are inputs of the program, not part of it).
 
 Where it is used: the Monte Carlo engine's step (`gearte.monte_carlo`) and the gearte functions
-decorated with `kept_jit` (an `eqx.filter_jit` that goes through the store: the cycloid-pin
-reference analyses). A program is kept only
+decorated with `kept_jit` (an `eqx.filter_jit` that goes through the store: what a `gearte run` computes
+besides the Monte Carlo, the sensitivities, a unit's TE trace, the drives' responses, the cycloid-pin reference
+analyses and the optimisers of the study kinds). A program is kept only
 
 - for the CPU (the CPU's LAPACK kernels are set up before a program is loaded, as lowering one
   would). In a several-process run (`jax.distributed`) each process keeps its own programs: the key

@@ -231,7 +231,7 @@ class Sensitivity(eqx.Module):
     modification: CycloidModification
 
 
-@eqx.filter_jit
+@kept_jit
 def _grad_jit(drive, err, positions, metrics: tuple[AbstractMetric, ...]):
     def f(diff):
         mod, e = diff

@@ -106,6 +106,7 @@ from jaxtyping import Array, Float
 
 from ..core.extrema import grid_size
 from ..core.metrics import RMS, AbstractMetric, Peak, PeakToPeak
+from ..core.programs import kept_jit
 from ..core.schema import ConfigError, Table
 from ..core.signal import Components, TESignal, evaluate
 from ..core.twoscale import TwoScaleExtrema, extrema_auto, fast_line_order
@@ -168,7 +169,7 @@ __all__ = [
     "tooth_zone_factor",
 ]
 
-_extrema_jit = eqx.filter_jit(extrema_auto)
+_extrema_jit = kept_jit(extrema_auto)
 
 
 class HarmonicDrive(AbstractSinusoidalDrive):

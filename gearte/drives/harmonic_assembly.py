@@ -25,6 +25,7 @@ from jaxtyping import Array
 
 from ..core.extrema import _basis, _grid_values, grid_size
 from ..core.precision import require_x64
+from ..core.programs import kept_jit
 from ..core.signal import to_signal
 from ..core.solution import RESULTS, check
 from .harmonic_estimate import class_phasors, source_phasors
@@ -84,7 +85,7 @@ def _turned(base: Mapping[str, Eccentricity], adjustable: Sequence[str], y) -> d
     return out
 
 
-@eqx.filter_jit
+@kept_jit
 def _solve_all(
     drive: HarmonicDrive,
     base: dict[str, Eccentricity],

@@ -24,6 +24,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ..core.programs import kept_jit
 from ..core.solution import RESULTS
 from ..core.units import ARCSEC_PER_RAD
 from ..core.validate import as_int
@@ -179,7 +180,7 @@ class HelicalPlanetary(eqx.Module):
         return smooth_peak_to_peak(dte, smooth)
 
 
-@eqx.filter_jit
+@kept_jit
 def _response_jit(drive: HelicalPlanetary, modifications, errors) -> DynamicResponse:
     return drive._response(modifications, errors)
 

@@ -38,6 +38,7 @@ from jaxtyping import Array, Float
 from ..core.linalg import solve_spd
 from ..core.metrics import AbstractMetric, Quantity
 from ..core.precision import require_x64
+from ..core.programs import kept_jit
 from ..core.solution import RESULTS
 from ..core.units import ARCSEC_PER_RAD
 from .helical_equations import CARRIER, SUN, StageSystem, error_sources, loa_errors, stage_system
@@ -499,7 +500,7 @@ class HelicalPlanetaryDrive(AbstractGridDrive):
             raise ConfigError(f"{table.where} {e}") from None
 
 
-@eqx.filter_jit
+@kept_jit
 def _response_jit(drive: HelicalPlanetaryDrive, errors: Mapping[str, Any] | None) -> HelicalResponse:
     return drive.response(errors)
 

@@ -32,6 +32,7 @@ from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
 from ..core.extrema import Extrema, extrema, grid_size
 from ..core.metrics import RMS, AbstractMetric, Peak, PeakToPeak
+from ..core.programs import kept_jit
 from ..core.signal import Components, TESignal, evaluate, to_signal
 from ..core.validate import check_array_values
 
@@ -384,7 +385,7 @@ def sample_key(key: PRNGKeyArray, index) -> PRNGKeyArray:
     return jax.random.fold_in(key, index)
 
 
-@eqx.filter_jit
+@kept_jit
 def _signal_and_extrema(drive: AbstractSinusoidalDrive, errors: Errors) -> tuple[TESignal, Extrema]:
     signal = drive.signal(errors)
     return signal, drive.extrema(signal)

@@ -53,6 +53,7 @@ from jaxtyping import Array, Float
 
 from ..core.metrics import AbstractMetric, Quantity
 from ..core.precision import require_x64
+from ..core.programs import kept_jit
 from ..core.schema import ConfigError
 from ..core.solution import RESULTS
 from ..core.units import ARCSEC_PER_RAD, TWO_PI
@@ -426,7 +427,7 @@ def solve_order(z_c: int, thetas: Float[Array, " p"]) -> Array:
     return jnp.argsort(jnp.mod(z_c * thetas, TWO_PI) + TWO_PI * sector)
 
 
-@eqx.filter_jit
+@kept_jit
 def _response_jit(drive: RVKHV, err, thetas) -> RVResponse:
     """Both load directions. Each solve starts from the solution at the previous angle in the order of the eccentrics'
     phase (z_c θ_o mod 2π), where the contact states of neighbours are alike (a `lax.scan`). Where the count of angles

@@ -33,6 +33,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..core.extrema import smooth_peak
 from ..core.metrics import AbstractMetric, Peak, PeakToPeak
 from ..core.precision import require_x64
+from ..core.programs import kept_jit
 from ..core.signal import Components, to_signal
 from ..core.solution import RESULTS, check
 from ..core.units import TWO_PI as _TWO_PI
@@ -377,7 +378,7 @@ def evaluate_rule(
     }
 
 
-@eqx.filter_jit
+@kept_jit
 def _optimise_rule(
     p: RuleProblem,
     objective: str,

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..core.metrics import AbstractMetric, Peak, check_offered
+from ..core.programs import kept_jit
 from ..drives.protocol import AbstractDrive, Eccentricity
 from ..studies.errors import ErrorModel
 from ..studies.laws import AbstractValueLaw
@@ -217,7 +218,7 @@ def common_draws(p: BudgetProblem, key: PRNGKeyArray, n: int) -> _Draws:
     return _common_draws_jit(p, key, n)
 
 
-@eqx.filter_jit
+@kept_jit
 def _common_draws_jit(p: BudgetProblem, key: PRNGKeyArray, n: int) -> _Draws:
     errs = jax.vmap(p.model.sample)(sample_keys(key, 0, n))
     u = {}

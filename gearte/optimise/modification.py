@@ -32,6 +32,7 @@ import optimistix as optx
 from jaxtyping import Array, ArrayLike
 
 from ..core.precision import require_x64
+from ..core.programs import kept_jit
 from ..core.schema import ConfigError, Table
 from ..core.solution import RESULTS, check, result_name
 from ..core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD
@@ -92,7 +93,7 @@ def _with(drive: CycloidPin, x, rotation: bool) -> CycloidPin:
     return eqx.tree_at(lambda d: d.modification, drive, mod)
 
 
-@eqx.filter_jit
+@kept_jit
 def _solve_penalised(
     drive: CycloidPin,
     err: CycloidErrors,

@@ -26,6 +26,7 @@ from jaxtyping import Array, Float, PRNGKeyArray, UInt
 
 from ..core.metrics import AbstractMetric
 from ..core.precision import require_x64
+from ..core.programs import kept_jit
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from ..core.validate import as_int
 from ..drives.protocol import AbstractDrive
@@ -49,7 +50,7 @@ class PathwiseSensitivity(eqx.Module):
     n_samples: int = eqx.field(static=True)
 
 
-@eqx.filter_jit
+@kept_jit
 def _chunk_grad(
     drive: AbstractDrive,
     metrics: tuple[AbstractMetric, ...],
