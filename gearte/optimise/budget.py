@@ -49,6 +49,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from tqdm import tqdm
 
 from ..core.precision import require_x64
+from ..core.programs import kept_jit
 from ..core.solution import RESULTS, check
 from ..core.validate import as_int
 from ..studies.montecarlo import as_key
@@ -144,17 +145,17 @@ class BudgetResult(eqx.Module):
 # Module-level compiled functions, keyed on the problem's structure and not on a fresh closure: a
 # Pareto front, a second budget on the same drive or a random-assembly comparison reuses the code
 # compiled for the first (every array in the problem, spec included, is a traced argument).
-@eqx.filter_jit
+@kept_jit
 def _exact_samples_jit(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws) -> Array:
     return metric_samples(p, tolerances, draws, exact=True)
 
 
-@eqx.filter_jit
+@kept_jit
 def _worst_violation_jit(p: BudgetProblem, tolerances: Mapping[str, Array], draws: _Draws) -> Array:
     return jnp.max(_violation(p, metric_samples(p, tolerances, draws)))
 
 
-@eqx.filter_jit
+@kept_jit
 def _tight_tolerances_jit(p: BudgetProblem, y: Array, draws: _Draws) -> dict[str, Array]:
     return tight_tolerances(p, y, draws)
 
@@ -180,6 +181,16 @@ def _cost_objective(y: Array, args: tuple[BudgetProblem, _Draws]) -> Array:
     """The budget's objective: the capped cost of the tight tolerances in the direction e^y."""
     p, draws = args
     return _capped_cost(p, tight_tolerances(p, y, draws))
+
+
+#: The optimiser of the budget's smoothed cost: it is not smooth to machine precision, so 1e-6 relative.
+_BFGS = optx.BFGS(rtol=1e-6, atol=1e-6)
+
+
+@kept_jit
+def _minimise_cost(p: BudgetProblem, y0: Array, draws: _Draws, max_steps: int) -> optx.Solution:
+    """BFGS on `_cost_objective` from y0, compiled once per problem structure (a repeat run loads its program)."""
+    return optx.minimise(_cost_objective, _BFGS, y0, (p, draws), max_steps=max_steps, throw=False)
 
 
 def _cost_objective_shown(y: Array, args: tuple[BudgetProblem, _Draws]) -> Array:
@@ -351,13 +362,14 @@ def optimise_budget(
 
     # Start from the nominal tolerances' proportions.
     y0 = jnp.log(jnp.asarray([float(p.nominal[n]) for n in p.names]))
-    # The smoothed statistic is not smooth to machine precision: ask for 1e-6 relative cost.
     show = sys.stderr.isatty() if progress is None else progress
     with tqdm(desc="budget: BFGS on the smoothed cost", unit=" evaluations", disable=not show, leave=False) as bar:
         _BAR.append(bar)
         try:
-            fn = _cost_objective_shown if show else _cost_objective
-            sol = optx.minimise(fn, optx.BFGS(rtol=1e-6, atol=1e-6), y0, (p, draws), max_steps=max_steps, throw=False)
+            if show:
+                sol = optx.minimise(_cost_objective_shown, _BFGS, y0, (p, draws), max_steps=max_steps, throw=False)
+            else:
+                sol = _minimise_cost(p, y0, draws, max_steps)
             jax.effects_barrier()
         finally:
             _BAR.pop()
