@@ -3,6 +3,7 @@ takes array values as inputs, and is only kept under a key that covers what it w
 
 import dataclasses
 import os
+from fractions import Fraction
 from pathlib import Path
 
 import equinox as eqx
@@ -340,3 +341,12 @@ def test_a_repeat_run_loads_the_sensitivities_and_the_unit_s_trace(store_at):
     for a, b in zip(grads, grads_loaded, strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     np.testing.assert_array_equal(trace.te, trace_loaded.te)
+
+
+def test_exact_frequencies_are_trusted_static_values():
+    # A signal's frequencies are `fractions.Fraction`s (a harmonic drive's extrema take the signal): their repr
+    # shows the whole value, so a program of them is kept, under a key that tells one frequency from another.
+    x = jnp.ones(2)
+    key = programs.program_key("f", (x, Fraction(7, 24)))
+    assert key is not None
+    assert key != programs.program_key("f", (x, Fraction(7, 25)))

@@ -29,8 +29,9 @@ analyses and the optimisers of the study kinds). A program is kept only
   covers each process's local devices, and only process 0 writes it), so without the store the other
   processes would compile the study's programs on every run;
 - when its key can be trusted: every pytree node class, and the class of every static value, comes
-  from gearte, equinox, JAX, NumPy or Python's builtins (a user's own class could call code whose
-  source the digest does not cover, or leave a value out of its `repr`),
+  from gearte, equinox, JAX, NumPy, Python's builtins or `fractions.Fraction` (the drives' exact
+  frequencies; a user's own class could call code whose source the digest does not cover, or leave
+  a value out of its `repr`),
   and no static value's `repr` hides its value (an object address ``at 0x…`` or a truncated
   array ``...``);
 - on disk only when it does not call back into Python (a callback, equinox's run-time errors):
@@ -75,7 +76,7 @@ MAX_STORE_BYTES = 512 * 2**20
 #: Programs held in memory per process (a key's program is loaded or compiled once per process).
 MEMORY_PROGRAMS = 32
 
-_TRUSTED_MODULES = ("gearte", "equinox", "jax", "jaxlib", "numpy", "builtins", "collections", "optimistix", "lineax", "diffrax")
+_TRUSTED_MODULES = ("gearte", "equinox", "jax", "jaxlib", "numpy", "builtins", "collections", "fractions", "optimistix", "lineax", "diffrax")
 _SUFFIX = ".program"
 
 
