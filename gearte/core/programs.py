@@ -76,7 +76,19 @@ MAX_STORE_BYTES = 512 * 2**20
 #: Programs held in memory per process (a key's program is loaded or compiled once per process).
 MEMORY_PROGRAMS = 32
 
-_TRUSTED_MODULES = ("gearte", "equinox", "jax", "jaxlib", "numpy", "builtins", "collections", "fractions", "optimistix", "lineax", "diffrax")
+_TRUSTED_MODULES = (
+    "gearte",
+    "equinox",
+    "jax",
+    "jaxlib",
+    "numpy",
+    "builtins",
+    "collections",
+    "fractions",
+    "optimistix",
+    "lineax",
+    "diffrax",
+)
 _SUFFIX = ".program"
 
 
