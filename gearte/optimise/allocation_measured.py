@@ -103,7 +103,7 @@ def _optimise(
 
     solver = optx.BFGS(rtol=1e-8, atol=1e-8)
     sol = jax.vmap(lambda s: optx.minimise(surrogate, solver, s, None, max_steps=max_steps, throw=False))(y0)
-    return sol.value, sol.result, jax.vmap(lambda y: metric(drive, signal(y)))(sol.value)
+    return sol.value, sol.result, _metric_at(drive, metric, errors, names, counts, sol.value)
 
 
 def allocate_measured(
