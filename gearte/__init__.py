@@ -120,17 +120,19 @@ if TYPE_CHECKING:
     )
     from .optimise.rv_assembly import AssemblyPhases as AssemblyPhases, best_planet_assembly as best_planet_assembly
     from .optimise.allocation import (
-        AbstractRuleObjective as AbstractRuleObjective,
-        Expected as Expected,
-        Robust as Robust,
         RuleAllocation as RuleAllocation,
-        WorstCase as WorstCase,
         RuleProblem as RuleProblem,
         allocate_rule as allocate_rule,
         evaluate_rule as evaluate_rule,
         expected as expected,
         rule_problem as rule_problem,
         worst_case as worst_case,
+    )
+    from .optimise.rule_objectives import (
+        AbstractRuleObjective as AbstractRuleObjective,
+        Expected as Expected,
+        Robust as Robust,
+        WorstCase as WorstCase,
     )
     from .optimise.allocation_measured import MeasuredAllocation as MeasuredAllocation, allocate_measured as allocate_measured
     from .optimise.budget import (
@@ -328,10 +330,10 @@ _LAZY: dict[str, str] = {
     "RuleAllocation": ".optimise.allocation",
     "RuleProblem": ".optimise.allocation",
     "allocate_rule": ".optimise.allocation",
-    "AbstractRuleObjective": ".optimise.allocation",
-    "Expected": ".optimise.allocation",
-    "Robust": ".optimise.allocation",
-    "WorstCase": ".optimise.allocation",
+    "AbstractRuleObjective": ".optimise.rule_objectives",
+    "Expected": ".optimise.rule_objectives",
+    "Robust": ".optimise.rule_objectives",
+    "WorstCase": ".optimise.rule_objectives",
     "evaluate_rule": ".optimise.allocation",
     "expected": ".optimise.allocation",
     "rule_problem": ".optimise.allocation",

@@ -102,6 +102,23 @@ def test_gearte_drives_exports_every_drive_and_the_helical_model_on_first_use():
         drives.no_such_name  # noqa: B018
 
 
+def test_check_of_a_planetary_study_imports_no_solver():
+    """`gearte check` of a planetary study, with or without an `[allocation]` or `[budget]` table, builds the whole
+    study (JAX) but imports neither optimistix (a quarter of a second) nor matplotlib: the study kinds import their
+    optimisers when they run, not when their table is read. (One interpreter checks the three files: a module
+    imported by any of them is still loaded at the end.)"""
+    examples = ["planetary_wang2013_random", "planetary_wang2013_allocate", "planetary_wang2013_budget"]
+    code = (
+        "import contextlib, io, json, sys\nfrom gearte.cli.main import main\nout = io.StringIO()\n"
+        f"with contextlib.redirect_stdout(out):\n    status = [main(['check', f'examples/{{e}}.toml']) for e in {examples!r}]\n"
+        "print(json.dumps([status, out.getvalue(), sorted(m for m in ('jax', 'optimistix', 'lineax', 'matplotlib') if m in sys.modules)]))"
+    )
+    status, out, loaded = fresh(code)
+    assert status == [0, 0, 0] and out.count(": OK (") == 3, (status, out)
+    assert "[allocation]" in out and "[budget]" in out, out  # the kinds' tables were read
+    assert loaded == ["jax"], loaded
+
+
 def test_kind_tables_of_the_first_checks_match_the_study_kinds():
     from gearte.cli.config import KIND_TABLES
     from gearte.cli.kinds import STUDY_KINDS

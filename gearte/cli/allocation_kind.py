@@ -10,10 +10,9 @@ import numpy as np
 
 from ..core.metrics import Peak
 from ..core.schema import MAX_SAMPLES, ConfigError, Table
-from ..core.solution import is_successful, message
 from ..core.units import UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import AbstractSinusoidalDrive, Figure
-from ..optimise.allocation import RULE_OBJECTIVES, allocate_rule, evaluate_rule, rule_problem
+from ..optimise.rule_objectives import RULE_OBJECTIVES
 from ..studies.errors import ErrorModel, ErrorSource
 from ..studies.laws import FixedPhase, Optimised, RelativePhase, UniformPhase
 from ..studies.montecarlo import TEStudy, as_key, monte_carlo
@@ -110,6 +109,10 @@ class Allocation(AbstractStudyKind):
             )
 
     def run(self, study: Study, spec: AllocationSpec, *, progress: bool | None) -> KindOutcome:
+        # The optimiser (optimistix) is imported here: reading and checking the table need none of it.
+        from ..core.solution import is_successful, message
+        from ..optimise.allocation import allocate_rule, evaluate_rule, rule_problem
+
         key = kind_key(study.seed)
         k_opt, k_seed = jax.random.split(key)
         drive = study.drive

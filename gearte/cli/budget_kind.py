@@ -9,10 +9,8 @@ import jax
 
 from ..core.metrics import AbstractMetric
 from ..core.schema import MAX_SAMPLES, ConfigError, Table
-from ..core.solution import is_successful, message
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import Figure
-from ..optimise.budget import contributions, optimise_budget, pareto_front, uniform_scaling
 from ..optimise.budget_model import Constraint, budget_problem
 from ..optimise.costs import Exponential, GradeTable, Power, Reciprocal, ReciprocalSquare
 from ..optimise.statistics import MeanKSigma, Yield, binomial_se
@@ -190,6 +188,10 @@ class Budget(AbstractStudyKind):
         )
 
     def run(self, study: Study, spec: BudgetSpec, *, progress: bool | None) -> KindOutcome:
+        # The optimiser (optimistix) is imported here: reading and checking the table need none of it.
+        from ..core.solution import is_successful, message
+        from ..optimise.budget import contributions, optimise_budget, pareto_front, uniform_scaling
+
         b = spec
         u = study.unit
         key = kind_key(study.seed)

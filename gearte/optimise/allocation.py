@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -41,6 +41,7 @@ from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
 from ..studies.errors import ErrorModel
 from ..studies.laws import FixedPhase, RelativePhase, UniformPhase
 from ..studies.montecarlo import as_key, monte_carlo
+from .rule_objectives import RULE_OBJECTIVES, AbstractRuleObjective, WorstCase
 
 
 def starts_result(results, best) -> tuple[int, Any]:
@@ -300,35 +301,6 @@ def expected(
     (or drawn by their laws if `robust`), by Monte Carlo with `n_samples` samples."""
     fn = _RuleSample(p, jnp.asarray(offsets, dtype=float), robust, metric)
     return jnp.mean(jnp.asarray(monte_carlo(fn, key=key, n_samples=n_samples, block_size=1024, progress=False).values))
-
-
-class AbstractRuleObjective(eqx.Module):
-    """What `allocate_rule` minimises over the unknown phases (`WorstCase`, `Expected`, `Robust`)."""
-
-    name: ClassVar[str]
-
-
-class WorstCase(AbstractRuleObjective):
-    """The worst case: magnitudes at the tolerances, the worst unknown phases (exact; every unknown phase must
-    drive one frequency)."""
-
-    name: ClassVar[str] = "worst_case"
-
-
-class Expected(AbstractRuleObjective):
-    """The expected TE: magnitudes at the tolerances, mean over uniform unknown phases."""
-
-    name: ClassVar[str] = "expected"
-
-
-class Robust(AbstractRuleObjective):
-    """The expected TE with the magnitudes drawn by their laws too (e.g. Rayleigh within the tolerance)."""
-
-    name: ClassVar[str] = "robust"
-
-
-#: The rule objectives by name (a study file's ``[allocation] objective``).
-RULE_OBJECTIVES: dict[str, type[AbstractRuleObjective]] = {c.name: c for c in (WorstCase, Expected, Robust)}
 
 
 def _rule_objective(objective: Any) -> str:
