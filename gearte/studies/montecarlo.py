@@ -30,6 +30,7 @@ from ..core.metrics import AbstractMetric, check_offered
 from ..core.precision import require_x64
 from ..core.programs import kept_program
 from ..core.schema import MAX_SAMPLES
+from ..core.validate import is_traced
 from ..drives.protocol import AbstractDrive, AbstractSinusoidalDrive
 from .errors import ErrorModel
 
@@ -154,7 +155,7 @@ def _on_every_device(tree, mesh: jax.sharding.Mesh):
     if mesh.size == 1 or mesh.is_multi_process:
         return tree
     replicated = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
-    concrete = lambda x: eqx.is_array(x) and not isinstance(x, jax.core.Tracer)
+    concrete = lambda x: eqx.is_array(x) and not is_traced(x)
     dynamic, fixed = eqx.partition(tree, concrete)
     return eqx.combine(jax.device_put(dynamic, replicated), fixed)
 
