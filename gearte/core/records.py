@@ -181,23 +181,42 @@ def _interpolated_bin(X: np.ndarray, k: int) -> float:
     return k - (2.0 * alpha - 1.0) / (alpha + 1.0)
 
 
-def _fit(t: np.ndarray, x: np.ndarray, w: np.ndarray, freqs_hz: Sequence[float]) -> tuple[np.ndarray, np.ndarray, float]:
+class _Basis:
+    """cos 2πft and sin 2πft over the record's times, computed once per frequency: the fit, the model and each
+    line's own part take the same columns (the same values as computing them again)."""
+
+    def __init__(self, t: np.ndarray):
+        self.t = t
+        self._columns: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+
+    def __call__(self, f: float) -> tuple[np.ndarray, np.ndarray]:
+        if f not in self._columns:
+            arg = _TWO_PI * f * self.t
+            self._columns[f] = (np.cos(arg), np.sin(arg))
+        return self._columns[f]
+
+    def retain(self, freqs_hz: Sequence[float]) -> None:
+        """Forget the columns of frequencies no longer in `freqs_hz` (each pass re-reads every frequency)."""
+        keep = set(freqs_hz)
+        self._columns = {f: c for f, c in self._columns.items() if f in keep}
+
+
+def _fit(basis: _Basis, x: np.ndarray, w: np.ndarray, freqs_hz: Sequence[float]) -> tuple[np.ndarray, np.ndarray, float]:
     """Weighted least squares of x on [1, cos 2πft, sin 2πft …]: (cos coefs, sin coefs, offset)."""
-    cols = [np.ones_like(t)]
+    cols = [np.ones_like(basis.t)]
     for f in freqs_hz:
-        arg = _TWO_PI * f * t
-        cols += [np.cos(arg), np.sin(arg)]
+        cols += list(basis(f))
     sw = np.sqrt(w)
     A = np.stack(cols, axis=1) * sw[:, None]
     coef, *_ = np.linalg.lstsq(A, x * sw, rcond=None)
     return coef[1::2], coef[2::2], float(coef[0])
 
 
-def _model(t: np.ndarray, freqs_hz, ac, bs, offset: float) -> np.ndarray:
-    out = np.full_like(t, offset)
+def _model(basis: _Basis, freqs_hz, ac, bs, offset: float) -> np.ndarray:
+    out = np.full_like(basis.t, offset)
     for f, a, b in zip(freqs_hz, ac, bs):
-        arg = _TWO_PI * f * t
-        out += a * np.cos(arg) + b * np.sin(arg)
+        c, s = basis(f)
+        out += a * c + b * s
     return out
 
 
@@ -234,6 +253,7 @@ def spectral_lines(
     n = len(x)
     fs = rec.sample_rate_hz
     t = np.arange(n) / fs  # local time from the first sample; phases are moved to t = 0 at the end
+    basis = _Basis(t)
     w = _window("hann", n)
     gain = w.sum() / 2.0
     df = fs / n
@@ -260,19 +280,21 @@ def spectral_lines(
             break
         freqs.append(_interpolated_bin(X, k) * df)
         for _p in range(refine_passes):
-            ac, bs, offset = _fit(t, x, w, freqs)
-            fitted = _model(t, freqs, ac, bs, offset)
+            basis.retain(freqs)
+            ac, bs, offset = _fit(basis, x, w, freqs)
+            fitted = _model(basis, freqs, ac, bs, offset)
             resid = x - fitted
             for j, f in enumerate(freqs):
-                own = _model(t, [f], ac[j : j + 1], bs[j : j + 1], 0.0)
+                own = _model(basis, [f], ac[j : j + 1], bs[j : j + 1], 0.0)
                 Xj = np.fft.rfft((resid + own) * w)
                 k0 = int(round(f / df))
                 lo, hi = max(k0 - 2, 1), min(k0 + 3, len(Xj) - 1)
                 kj = lo + int(np.argmax(np.abs(Xj[lo:hi])))
                 if 1 <= kj < len(Xj) - 1:
                     freqs[j] = _interpolated_bin(Xj, kj) * df
-        ac, bs, offset = _fit(t, x, w, freqs)
-        resid = x - _model(t, freqs, ac, bs, offset)
+        basis.retain(freqs)
+        ac, bs, offset = _fit(basis, x, w, freqs)
+        resid = x - _model(basis, freqs, ac, bs, offset)
         largest = float(np.max(np.hypot(ac, bs)))
     f_hz = np.asarray(freqs)
     amp = np.hypot(ac, bs)
