@@ -108,6 +108,26 @@ def test_key_covers_static_values_source_and_block(study, monkeypatch):
     assert programs.program_key("step", study, 64) != key
 
 
+def test_a_structure_is_described_once(study, monkeypatch):
+    # Describing a study's structure (its text: equinox formats every static field) takes milliseconds; a loop calls
+    # one program on many trees of one structure (a budget's iterations), so each structure is described once.
+    walked = []
+    node_types = programs._node_types
+    monkeypatch.setattr(programs, "_node_types", lambda treedef, found: walked.append(1) or node_types(treedef, found))
+    monkeypatch.setattr(programs, "_STRUCTURES", {})
+    key = programs.program_key("step", study, 64)
+    nodes = len(walked)
+    assert nodes > 10
+    again = _scaled(study, 2.0)  # a new tree of the same structure (other array values)
+    assert programs.program_key("step", again, 64) == key and len(walked) == nodes
+    # The same key as a first description of that tree, and another static value is still another key.
+    monkeypatch.setattr(programs, "_STRUCTURES", {})
+    assert programs.program_key("step", again, 64) == key
+    changed = jax.tree.map(lambda x: x, study)
+    object.__setattr__(changed.errors, "specs", {**study.errors.specs, "sun_manufacturing": None})
+    assert programs.program_key("step", changed, 64) not in (key, None)
+
+
 class _Outside(eqx.Module):
     """A class from outside gearte: its code is not covered by the key."""
 

@@ -142,11 +142,34 @@ def _node_types(treedef, found: set[type]) -> set[type]:
     return found
 
 
+#: A tree structure's text and node types, by structure: its text takes milliseconds (equinox formats every
+#: module's static fields), and a loop calls the same program on many trees of one structure.
+_STRUCTURES: dict[Any, tuple[str, frozenset[type]]] = {}
+
+
+def _structure(treedef) -> tuple[str, frozenset[type]]:
+    """``str(treedef)`` and the classes of its nodes and static data (`_node_types`), once per structure.
+    Structures are told apart as `jax.jit` tells them apart (equal and of equal hash: the same compiled
+    program); one whose static data cannot be hashed or compared is described afresh each time."""
+    try:
+        return _STRUCTURES[treedef]
+    except KeyError:
+        pass
+    except Exception:  # unhashable or incomparable static data
+        return str(treedef), frozenset(_node_types(treedef, set()))
+    info = (str(treedef), frozenset(_node_types(treedef, set())))
+    if len(_STRUCTURES) >= 256:
+        _STRUCTURES.clear()
+    _STRUCTURES[treedef] = info
+    return info
+
+
 def program_key(name: str, tree: Any, *static: Any) -> str | None:
     """The store's key of program `name` for inputs `tree` (a pytree: arrays are inputs, everything else is
     part of the program) and further `static` values; None when the key cannot be trusted (module notes)."""
     leaves, treedef = jax.tree.flatten(tree)
-    types = _node_types(treedef, set())
+    structure, node_types = _structure(treedef)
+    types = set(node_types)
     for leaf in leaves:
         if not eqx.is_array(leaf):
             _value_types(leaf, types)
@@ -154,7 +177,7 @@ def program_key(name: str, tree: Any, *static: Any) -> str | None:
     for t in types:  # a class of another package could hide a value from its repr, or run code the digest misses
         if (getattr(t, "__module__", "") or "").split(".")[0] not in _TRUSTED_MODULES:
             return None
-    parts = [name, _environment(), str(treedef), repr(static)]
+    parts = [name, _environment(), structure, repr(static)]
     for leaf in leaves:
         if eqx.is_array(leaf):
             aval = jax.typeof(leaf)
