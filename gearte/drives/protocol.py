@@ -336,7 +336,8 @@ class AbstractSinusoidalDrive(AbstractDrive):
         )
 
     def trace(self, errors: Errors) -> Trace:
-        # Two compiled programs (the persistent compilation cache keeps them), not dozens of eager operations.
+        # Two compiled programs, not dozens of eager operations; a repeat run loads the first from the program store
+        # (`gearte.core.programs`: `_signal_and_extrema` is a kept program) and the second from JAX's cache.
         signal, ext = _signal_and_extrema(self, errors)
         revs = float(signal.hyper_period_revs)
         top_order = max(signal.orders) if signal.orders else 1
