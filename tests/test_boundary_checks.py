@@ -108,6 +108,21 @@ def test_reassemble_passes_throw_to_allocate_measured(monkeypatch):
     assert seen == [True, False]
 
 
+def test_allocate_measured_checks_its_width_and_starts():
+    d = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 1)], gain=GAIN)
+    errs = {"a": gearte.Eccentricity(5.0, 0.3), "b": gearte.Eccentricity(3.0, 0.3)}
+    for width in (0.0, -1e-3, math.nan, math.inf, "wide", True):
+        with pytest.raises(ValueError, match="width"):
+            gearte.allocate_measured(d, errs, adjust={"b": None}, key=0, starts=2, width=width)  # pyright: ignore[reportArgumentType]
+    for starts in (0, -1, 1.5):
+        with pytest.raises(ValueError, match="starts"):
+            gearte.allocate_measured(d, errs, adjust={"b": None}, key=0, starts=starts)  # pyright: ignore[reportArgumentType]
+    # A width given is the one used: the same optimum as the default's (|A1 − A2|), and the metric as delivered.
+    r = gearte.allocate_measured(d, errs, adjust={"b": None}, key=0, starts=2, width=1e-7)
+    np.testing.assert_allclose(float(r.te), 2.0 * GAIN, rtol=1e-6)
+    np.testing.assert_allclose(float(r.te_before), 8.0 * GAIN, rtol=1e-12)  # both at 0.3: |A1 + A2|
+
+
 # 5. pathwise_sensitivities
 
 

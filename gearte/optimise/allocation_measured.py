@@ -21,6 +21,7 @@ from ..core.metrics import AbstractMetric, Peak
 from ..core.precision import require_x64
 from ..core.solution import RESULTS, check
 from ..core.units import TWO_PI as _TWO_PI
+from ..core.validate import as_float, as_int
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
 from ..studies.montecarlo import as_key
 from .allocation import best_start, check_extremum_metric, check_phase_drive, partial_success, starts_result
@@ -83,11 +84,14 @@ def _optimise(
     y0: Float[Array, "starts dim"],
     width: Float[Array, ""],
     max_steps: int,
-) -> tuple[Float[Array, "starts dim"], optx.RESULTS, Float[Array, " starts"]]:
-    """BFGS on the smooth surrogate of `metric` (width `width`, rad) from every row of `y0`: the ends, their result
-    codes and the exact metric at each end. Module level, with the unit's values (errors, starts, width) as arguments:
-    another unit of the same drive structure and shapes traces and compiles nothing."""
+) -> tuple[Float[Array, "starts dim"], optx.RESULTS, Float[Array, " starts"], Float[Array, ""]]:
+    """BFGS on the smooth surrogate of `metric` (width `width`, rad; 0: 0.2 % of the exact metric at ``y0[0]``) from
+    every row of `y0`: the ends, their result codes, the exact metric at each end and at ``y0[0]``. Module level, with
+    the unit's values (errors, starts, width) as arguments: another unit of the same drive structure and shapes traces
+    and compiles nothing."""
     errs = dict(errors)
+    first = _metric_at(drive, metric, errors, names, counts, y0[:1])[0]
+    width = jnp.where(width > 0, width, 2e-3 * jnp.maximum(first, 1e-12))
 
     def signal(y):
         return drive.signal(_with_phases(errs, list(names), list(counts), y))
@@ -103,7 +107,7 @@ def _optimise(
 
     solver = optx.BFGS(rtol=1e-8, atol=1e-8)
     sol = jax.vmap(lambda s: optx.minimise(surrogate, solver, s, None, max_steps=max_steps, throw=False))(y0)
-    return sol.value, sol.result, _metric_at(drive, metric, errors, names, counts, sol.value)
+    return sol.value, sol.result, _metric_at(drive, metric, errors, names, counts, sol.value), first
 
 
 def allocate_measured(
@@ -148,6 +152,9 @@ def allocate_measured(
             raise ValueError(f"adjust[{n!r}]: the step between positions must be > 0 rad, or None for any angle")
     if not adjust:
         raise ValueError("adjust: name at least one error source whose phase may be chosen")
+    starts = as_int("starts", starts, minimum=1)
+    if width is not None:
+        width = as_float("width", width, positive=True, hint="the smoothing width, rad; None for the default")
     errors = drive.checked(errors)
     names = list(adjust)
     counts = [counts_all[n] for n in names]
@@ -157,12 +164,11 @@ def allocate_measured(
     def exact(y):
         return metric(drive, drive.signal(_with_phases(errors, names, counts, y)))
 
-    te_before = exact(y_given)
-    w = float(width) if width is not None else 2e-3 * max(float(te_before), 1e-12)
-
     y0 = _TWO_PI * jax.random.uniform(as_key(key), (starts, dim), dtype=float)
     y0 = y0.at[0].set(y_given)
-    ends, results, values = _optimise(drive, metric, tuple(errors.items()), tuple(names), tuple(counts), y0, jnp.asarray(w), max_steps)
+    # The metric as delivered (the first start) and the default width come out of the same compiled program.
+    w = jnp.asarray(0.0 if width is None else width)
+    ends, results, values, te_before = _optimise(drive, metric, tuple(errors.items()), tuple(names), tuple(counts), y0, w, max_steps)
     best = best_start(values, results)
     y_best, te_best = ends[best], values[best]
 
