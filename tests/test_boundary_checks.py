@@ -108,7 +108,7 @@ def test_reassemble_passes_throw_to_allocate_measured(monkeypatch):
     assert seen == [True, False]
 
 
-def test_allocate_measured_checks_its_width_and_starts():
+def test_allocate_measured_checks_its_width_and_starts(monkeypatch):
     d = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 1)], gain=GAIN)
     errs = {"a": gearte.Eccentricity(5.0, 0.3), "b": gearte.Eccentricity(3.0, 0.3)}
     for width in (0.0, -1e-3, math.nan, math.inf, "wide", True):
@@ -117,10 +117,18 @@ def test_allocate_measured_checks_its_width_and_starts():
     for starts in (0, -1, 1.5):
         with pytest.raises(ValueError, match="starts"):
             gearte.allocate_measured(d, errs, adjust={"b": None}, key=0, starts=starts)  # pyright: ignore[reportArgumentType]
-    # A width given is the one used: the same optimum as the default's (|A1 − A2|), and the metric as delivered.
-    r = gearte.allocate_measured(d, errs, adjust={"b": None}, key=0, starts=2, width=1e-7)
-    np.testing.assert_allclose(float(r.te), 2.0 * GAIN, rtol=1e-6)
-    np.testing.assert_allclose(float(r.te_before), 8.0 * GAIN, rtol=1e-12)  # both at 0.3: |A1 + A2|
+    # A width given is the one the optimiser gets (None: 0, its default of 0.2 % of the metric as delivered); both
+    # find the optimum |A1 − A2| and report the metric as delivered, |A1 + A2| (both phases at 0.3).
+    from gearte.optimise import allocation_measured
+
+    widths = []
+    real = allocation_measured._optimise
+    monkeypatch.setattr(allocation_measured, "_optimise", lambda *a: widths.append(float(a[6])) or real(*a))
+    for width in (1e-7, None):
+        r = gearte.allocate_measured(d, errs, adjust={"b": None}, key=0, starts=2, width=width)
+        np.testing.assert_allclose(float(r.te), 2.0 * GAIN, rtol=1e-6)
+        np.testing.assert_allclose(float(r.te_before), 8.0 * GAIN, rtol=1e-12)
+    assert widths == [1e-7, 0.0]
 
 
 # 5. pathwise_sensitivities
