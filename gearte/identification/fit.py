@@ -4,7 +4,7 @@ Every error source instance (a scalar source, or one planet of a per-planet sour
 an eccentricity as its Cartesian phasor (x, y) = e (cos φ, sin φ), µm, a signed deviation as its value;
 each record adds its own constant (an encoder's zero is arbitrary). The residual, model TE − measured
 TE on the record's input angles, is minimised by Levenberg–Marquardt (`optimistix.least_squares`),
-differentiating through the drive's model (`AbstractSinusoidalDrive.signal`), from a few starts under `vmap`.
+differentiating through the drive's model (`AbstractSinusoidalDrive.signal`), from a few starts, one after another (`jax.lax.map`).
 A grid drive (`AbstractGridDrive`, the cycloid-pin reducer) is identified on its own grid of input angles by
 `gearte.identification.fit_grid`, with the same result (`identify(..., adjust=, start=)`).
 
@@ -130,7 +130,11 @@ class IdentificationProblem(eqx.Module):
             r = self._residual(sol.value, z)
             return sol.value, jnp.sum(r**2) + rss_perp, sol.result, sol.stats["num_steps"]
 
-        ys, cost, results, steps = jax.vmap(one)(y0)
+        # One start after another, not under `jax.vmap`: batching optimistix's while loop batches its body (the
+        # model and its Jacobian) several times over while finding which of the loop's state is batched, and
+        # tracing the solve took 3-4 s instead of 1 s (the first `identify` of a planetary drive: 11 s -> 6-7 s).
+        # The starts are few and each converges in a few steps, so the solve itself takes as long as before.
+        ys, cost, results, steps = jax.lax.map(one, y0)
         best = jnp.argmin(cost)
         y = ys[best]
         result = RESULTS.promote(jax.tree_util.tree_map(lambda x: x[best], results))
@@ -420,7 +424,7 @@ def identify(
     - `turns`: with several records, for each a dict source → turn (rad) of that source at its assembly
       relative to the first (e.g. ``[{}, {"sun_assembly": pi/2}]``).
     - `key`: seed or key of the random starting phases.
-    - `starts`: Levenberg–Marquardt starts, run together under `vmap`; the best is kept.
+    - `starts`: Levenberg–Marquardt starts, run one after another; the best is kept.
     - `adjust`: a grid drive's sources to identify (default: all); the others are held at `start`.
     - `start`: a grid drive's errors where the solve begins and the identifiability is read (source → value;
       sources left out are 0).
