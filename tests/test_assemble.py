@@ -66,10 +66,10 @@ def test_selective_assembly_beats_random_assembly():
 
 
 def test_random_batches_below_one_is_refused_before_any_work():
-    assert assemble_batch(DRIVE, parts(3, seed=7), random_batches=np.int64(2)) is not None  # NumPy's integers too
+    assert assemble_batch(DRIVE, parts(3, seed=7), key=0, random_batches=np.int64(2)) is not None  # NumPy's integers too
     for bad in (0, -5, 2.5, True, np.int64(0)):
         with pytest.raises(ValueError, match="random_batches: the comparison needs at least one random assembly"):
-            assemble_batch(DRIVE, parts(3, seed=7), random_batches=bad)
+            assemble_batch(DRIVE, parts(3, seed=7), key=0, random_batches=bad)
 
 
 def test_a_second_batch_of_the_same_drive_traces_nothing():

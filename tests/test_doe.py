@@ -461,8 +461,9 @@ def test_cycloid_lost_motion_over_two_deviations():
         (lambda: gearte.CentralComposite("ccc"), "Circumscribed"),  # pyright: ignore[reportArgumentType]
         (lambda: gearte.BoxBehnken().points(2), "3 to 7"),
         (lambda: gearte.BoxBehnken().points(8), "3 to 7"),
-        (lambda: gearte.SobolSequence(10), "8 or 16"),
-        (lambda: gearte.LatinHypercube(1), "LatinHypercube.n"),
+        (lambda: gearte.SobolSequence(10, seed=0), "8 or 16"),
+        (lambda: gearte.SobolSequence(16), "give its seed"),
+        (lambda: gearte.LatinHypercube(1, seed=0), "LatinHypercube.n"),
         (lambda: gearte.LatinHypercube(4, seed=-1), "seed"),
         (lambda: gearte.Variable("a", 2.0, 1.0), "above low"),
         (lambda: gearte.Variable("a", 0.0, math.inf), "finite"),

@@ -365,7 +365,7 @@ def test_assembly_cancels_within_a_class():
     # throw=False: the BFGS tolerances (rtol 1e-9, atol 1e-12 × the TE scale, kept as they were so that the example's
     # numbers stay the same) lie below the surrogate's rounding, so starts may end at max_steps with the optimum reached
     # (`test_assembly_reports_its_result_and_throws`); the result is checked here by its values.
-    res = optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, throw=False)
+    res = optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, throw=False, key=0)
     k = k_hand(180, 182, 90.0) / math.cos(ALPHA)
     assert res.before == pytest.approx(2 * k * abs(10 + 6 * np.exp(2j * 0.8)), rel=1e-9)
     # Best: the two phasors opposed, |10 − 6| = 4 µm; CS parts turned by δ turn the line by 2δ.
@@ -385,23 +385,23 @@ def test_assembly_of_another_unit_traces_nothing():
         {"cs_a": Eccentricity(10.0, 0.2), "cs_b": Eccentricity(6.0, 1.0)},
         {"cs_a": Eccentricity(7.0, 0.5), "cs_b": Eccentricity(9.0, 2.0)},
     ]
-    first = optimise_assembly(drive, units[0], adjustable=["cs_b"], starts=4, throw=False)
+    first = optimise_assembly(drive, units[0], adjustable=["cs_b"], starts=4, throw=False, key=0)
     with traces() as seen:
-        second = optimise_assembly(drive, units[1], adjustable=["cs_b"], starts=4, throw=False)
+        second = optimise_assembly(drive, units[1], adjustable=["cs_b"], starts=4, throw=False, key=0)
     assert not seen, dict(seen)  # neither the solve (`_solve_all`) nor anything else
     k = k_hand(180, 182, 90.0) / math.cos(ALPHA)
     assert second.before == pytest.approx(2 * k * abs(7 + 9 * np.exp(2j * 1.5)), rel=1e-9)
     assert second.after == pytest.approx(2 * k * 2.0, rel=1e-6)  # |9 − 7| µm
     assert math.cos(2 * ((2.0 + second.turns["cs_b"]) - 0.5)) == pytest.approx(-1.0, abs=1e-6)
     # The first unit again: its own numbers, exactly (nothing of the second unit kept in the compiled solve).
-    again = optimise_assembly(drive, units[0], adjustable=["cs_b"], starts=4, throw=False)
+    again = optimise_assembly(drive, units[0], adjustable=["cs_b"], starts=4, throw=False, key=0)
     assert (again.before, again.after, again.turns, again.converged) == (first.before, first.after, first.turns, first.converged)
 
 
 def test_assembly_cannot_cancel_cs_against_fs():
     drive, errs = cs_fs_drive(9.0, 8.0)
     k = k_hand(180, 182, 90.0) / math.cos(ALPHA)
-    res = optimise_assembly(drive, errs, adjustable=["cs", "fs"], starts=8, throw=False)
+    res = optimise_assembly(drive, errs, adjustable=["cs", "fs"], starts=8, throw=False, key=0)
     # The beat sweeps their relative phase over every output revolution: the pair's p2p stays
     # 2K(e₁ + e₂) up to the carrier sampling of the envelope crest, 1 − cos(π/45)·… ≥ 1 − (π/45)²/2.
     assert res.after >= 2 * k * 17.0 * (1 - (math.pi / 45) ** 2 / 2)
@@ -422,12 +422,12 @@ def test_assembly_reports_its_result_and_throws():
     # The optimum is reached within 8 BFGS steps, but no start meets the tolerances (near the optimum every step
     # is rejected by the line search), and the result says so: it is never dropped. (Not 16 steps: by then a start
     # may meet them, or not, as the last bits of the surrogate fall — the solve's rounding, not the optimum.)
-    res = optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, max_steps=8, throw=False)
+    res = optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, max_steps=8, throw=False, key=0)
     assert res.after == pytest.approx(2 * k * 4.0, rel=1e-6)
     assert res.result == gearte.RESULTS.nonlinear_max_steps_reached and res.starts == 5 and res.converged == 0
     # With throw=True (the default) an unsuccessful solve raises, naming the solver and the reason.
     with pytest.raises(RuntimeError, match="optimise_assembly: The maximum number of steps"):
-        optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, max_steps=8)
+        optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, max_steps=8, key=0)
 
 
 @pytest.mark.parametrize(
@@ -438,7 +438,7 @@ def test_assembly_bad_adjustable(adjustable, msg):
     drive = HarmonicDrive(180, 182, src, pitch_diameter=90.0)
     errs = {"cs_a": Eccentricity(10.0, 0.2), "t": Eccentricity(2.0, 1.0)}
     with pytest.raises(ValueError, match=msg):
-        optimise_assembly(drive, errs, adjustable=adjustable)
+        optimise_assembly(drive, errs, adjustable=adjustable, key=0)
 
 
 # ---------------------------------------------------------------- bad inputs

@@ -84,7 +84,7 @@ def test_exact_recovery_and_combined_phasor(planetary):
     assert kinds["constant"].members == ("planet_assembly[0]",)
     # a member of a combined phasor cannot be turned alone
     with pytest.raises(ValueError, match="shares its line with"):
-        reassemble(PLANETARY, sol, adjust={"sun_assembly": None})
+        reassemble(PLANETARY, sol, adjust={"sun_assembly": None}, key=0)
 
 
 def test_coverage_of_95_percent_intervals(planetary):
@@ -110,7 +110,7 @@ def test_second_record_with_a_turn_separates_the_combined_phasor(planetary):
     errs, _clean, _ = planetary
     turns = [{}, {"sun_assembly": math.pi / 2}, {"carrier_assembly": 2.0}]
     recs = [synthetic_record(PLANETARY, errs, key=0, revolutions=REVS, points_per_rev=PPR, turns=t) for t in turns]
-    sol = identify(PLANETARY, recs, turns=turns)
+    sol = identify(PLANETARY, recs, turns=turns, key=0)
     assert set(sol.labels) >= {"ring_manufacturing", "sun_assembly", "carrier_assembly"}
     assert not [g for g in sol.groups if g.kind == "combined"]
     for name in ("ring_manufacturing", "sun_assembly", "carrier_assembly"):
@@ -131,7 +131,7 @@ def harmonic():
 
 def test_harmonic_classes_are_combined_and_cs_phase_is_modulo_pi(harmonic):
     errs, rec, _ = harmonic
-    sol = identify(HARMONIC, rec)
+    sol = identify(HARMONIC, rec, key=0)
     assert sol.labels == ("cs_pitch", "fs_pitch", "wg_shaft_runout", "cs_tooth_to_tooth")
     np.testing.assert_allclose(np.asarray(sol.phase_period), [np.pi, np.pi, 2 * np.pi, 2 * np.pi])
     # Each class line is identified exactly: the model with the identified errors reproduces the record.
@@ -190,7 +190,7 @@ def test_jacobian_matches_finite_differences(planetary):
 def test_reassembly_predicts_lower_te(planetary):
     _errs, clean, problem = planetary
     sol = _solve(problem, [jnp.asarray(clean.te)], jax.random.key(0))
-    alloc = reassemble(PLANETARY, sol, adjust={"sun_manufacturing": None, "planet_manufacturing": None}, starts=4)
+    alloc = reassemble(PLANETARY, sol, adjust={"sun_manufacturing": None, "planet_manufacturing": None}, key=0, starts=4)
     assert float(alloc.te) < float(alloc.te_before)
     # te_before is the record's own peak about its constant (exact, so at least the sampled peak, and within 1 % of it)
     sampled = float(np.max(np.abs(clean.te - float(sol.offset[0]))))
@@ -247,10 +247,10 @@ def test_too_short_or_too_slow_record_says_how_long(planetary):
     errs, _, _ = planetary
     short = synthetic_record(PLANETARY, errs, key=0, revolutions=6, points_per_rev=PPR, input_rpm=60.0)
     with pytest.raises(RecordError, match=r"needs at least 1/1/8 = 8 revolutions \(8 s at 60 rpm\)"):
-        identify(PLANETARY, short)
+        identify(PLANETARY, short, key=0)
     slow = synthetic_record(PLANETARY, errs, key=0, revolutions=REVS, points_per_rev=1)
     with pytest.raises(RecordError, match="Nyquist"):
-        identify(PLANETARY, slow)
+        identify(PLANETARY, slow, key=0)
 
 
 def test_a_second_problem_of_the_same_drive_traces_and_compiles_nothing():

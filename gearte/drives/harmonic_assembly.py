@@ -145,7 +145,7 @@ def optimise_assembly(
     *,
     adjustable: Sequence[str],
     starts: int = 32,
-    key: int = 0,
+    key: int,
     max_steps: int = 256,
     throw: bool = True,
 ) -> AssemblyResult:
@@ -164,7 +164,8 @@ def optimise_assembly(
     - `drive`: the `HarmonicDrive`.
     - `errors`: the unit's errors (magnitudes µm, phases rad).
     - `adjustable`: names of the sources whose angle Θ can be chosen (not tooth-class ones).
-    - `starts`: random starting points (seeded by `key`, an integer).
+    - `starts`: random starting points.
+    - `key`: the seed (an integer) of the random starting points (required, as PRNG keys always are).
     - `max_steps`: BFGS steps per start.
     - `throw`: raise if the best start did not converge (else check `result`); a solve whose
       best start converged but some others did not is reported as `some_starts_failed`, not raised.

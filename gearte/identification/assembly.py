@@ -34,7 +34,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array
+from jaxtyping import Array, PRNGKeyArray
 from scipy.optimize import linear_sum_assignment
 
 from ..core.metrics import AbstractMetric, Peak
@@ -51,14 +51,15 @@ def reassemble(
     solution: Identification,
     *,
     adjust: Mapping[str, float | None],
-    key=0,
+    key: int | PRNGKeyArray,
     metric: AbstractMetric = Peak(),
     starts: int = 16,
     throw: bool = True,
 ) -> MeasuredAllocation:
     """The turns of the `adjust` sources (source → step between allowed positions, rad, or None) that minimise the
     TE of the drive with its identified errors (`gearte.allocate_measured`); `te_before` is the identified TE as
-    assembled, `te` the predicted TE after re-assembly. `throw`: raise if the best start did not converge (else check
+    assembled, `te` the predicted TE after re-assembly. `key`: seed or key of the random starts (required, as PRNG keys
+    always are). `throw`: raise if the best start did not converge (else check
     the result's `result`), as for `gearte.allocate_measured`."""
     combined = {m.split("[")[0]: g for g in solution.groups if g.kind == "combined" for m in g.members}
     for name in adjust:
@@ -185,7 +186,7 @@ def assemble_batch(
     parts: Mapping[str, Eccentricity],
     *,
     fixed: Mapping[str, Eccentricity] | None = None,
-    key=0,
+    key: int | PRNGKeyArray,
     metric: AbstractMetric = Peak(),
     rounds: int = 3,
     candidates: int = 12,
@@ -199,7 +200,7 @@ def assemble_batch(
     - `parts`: source name → the measured parts of that type, an `Eccentricity` of shape (N·count,) for a source
       with `count` instances per drive (e.g. 50 suns, 150 planets for three planets, 50 rings: N = 50 drives).
     - `fixed`: the other sources' errors, the same in every drive (default zero).
-    - `key`: seed or key (random start, random turns of the comparison).
+    - `key`: seed or key (random start, random turns of the comparison; required, as PRNG keys always are).
     - `metric`: `gearte.Peak()` or `gearte.PeakToPeak()` for the reported figures.
     - `rounds`, `candidates`: assignment rounds; turns tried per part.
     - `random_batches`: random assemblies of the same parts for the comparison.

@@ -406,8 +406,8 @@ def identify(
     drive: AbstractSinusoidalDrive | AbstractGridDrive,
     records: MeasuredRecord | Sequence[MeasuredRecord],
     *,
+    key: int | PRNGKeyArray,
     turns: Sequence[Mapping[str, float]] | None = None,
-    key: int | PRNGKeyArray = 0,
     starts: int = 4,
     max_steps: int = 100,
     adjust: Sequence[str] | None = None,
@@ -421,9 +421,9 @@ def identify(
     - `drive`: a sinusoidal drive (`gearte.Planetary2KH`, `gearte.HarmonicDrive`, `gearte.ExplicitDrive`), or a grid
       drive (`gearte.CycloidPin`; see `gearte.identification.fit_grid`).
     - `records`: one `MeasuredRecord`, or several of the same drive re-assembled.
+    - `key`: seed or key of the random starting phases (required: PRNG keys are always explicit).
     - `turns`: with several records, for each a dict source → turn (rad) of that source at its assembly
       relative to the first (e.g. ``[{}, {"sun_assembly": pi/2}]``).
-    - `key`: seed or key of the random starting phases.
     - `starts`: Levenberg–Marquardt starts, run one after another; the best is kept.
     - `adjust`: a grid drive's sources to identify (default: all); the others are held at `start`.
     - `start`: a grid drive's errors where the solve begins and the identifiability is read (source → value;

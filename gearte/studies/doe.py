@@ -240,7 +240,7 @@ class LatinHypercube(AbstractDesign):
     **Arguments:**
 
     - `n`: runs (≥ 2).
-    - `seed`: the random seed (integer ≥ 0); the same seed gives the same design.
+    - `seed`: the random seed (integer ≥ 0, required); the same seed gives the same design.
     - `centred`: put each run at its stratum's centre instead of uniformly inside it.
     """
 
@@ -248,7 +248,7 @@ class LatinHypercube(AbstractDesign):
     seed: int = eqx.field(static=True)
     centred: bool = eqx.field(static=True)
 
-    def __init__(self, n: int, *, seed: int = 0, centred: bool = False):
+    def __init__(self, n: int, *, seed: int, centred: bool = False):
         self.n, self.seed, self.centred = _whole("LatinHypercube.n", n, 2), _rng_seed("LatinHypercube.seed", seed), bool(centred)
 
     def points(self, n_vars: int) -> np.ndarray:
@@ -270,19 +270,21 @@ class SobolSequence(AbstractDesign):
 
     - `n`: runs, a power of two (≥ 2).
     - `scramble`: Owen scrambling (randomised, unbiased); False gives the plain sequence from 0.
-    - `seed`: the scrambling seed (integer ≥ 0).
+    - `seed`: the scrambling seed (integer ≥ 0), required with `scramble` (none is needed without).
     """
 
     n: int = eqx.field(static=True)
     scramble: bool = eqx.field(static=True)
     seed: int = eqx.field(static=True)
 
-    def __init__(self, n: int, *, scramble: bool = True, seed: int = 0):
+    def __init__(self, n: int, *, scramble: bool = True, seed: int | None = None):
         n = _whole("SobolSequence.n", n, 2)
         if n & (n - 1):
             lo = 1 << (n.bit_length() - 1)
             raise ValueError(f"SobolSequence.n: a Sobol' sequence is balanced on 2^m points; use {lo} or {2 * lo}, not {n}")
-        self.n, self.scramble, self.seed = n, bool(scramble), _rng_seed("SobolSequence.seed", seed)
+        if seed is None and scramble:
+            raise ValueError("SobolSequence.seed: a scrambled sequence is random; give its seed (e.g. seed=0), or scramble=False")
+        self.n, self.scramble, self.seed = n, bool(scramble), _rng_seed("SobolSequence.seed", 0 if seed is None else seed)
 
     def points(self, n_vars: int) -> np.ndarray:
         d = _count_vars(n_vars)
