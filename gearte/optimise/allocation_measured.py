@@ -71,7 +71,10 @@ def _metric_at(
     """The exact metric (rad) with the `names` sources' phases at each row of `ys` (`counts` entries each), the other
     errors as in `errors` (name, value pairs in the drive's order); traced once per drive structure and shapes."""
     errs = dict(errors)
-    return jax.vmap(lambda y: metric(drive, drive.signal(_with_phases(errs, list(names), list(counts), y))))(ys)
+    # The signals under `vmap`, the metric on the whole batch at once (metrics take any batch shape), as the Monte
+    # Carlo does: the exact extrema search works on dense arrays instead of through `vmap`'s batching of its loops.
+    signals = jax.vmap(lambda y: drive.signal(_with_phases(errs, list(names), list(counts), y)))(ys)
+    return metric(drive, signals)
 
 
 @eqx.filter_jit
