@@ -38,10 +38,13 @@ def test_four_devices_give_the_values_of_one(study, tmp_path):
     assert one.devices == 1
     script = textwrap.dedent(
         f"""
+        import os
         import jax, numpy as np
         jax.config.update("jax_enable_x64", True)
         import gearte
         from gearte.cli.config import load_study
+        from gearte.core.cache import enable_compilation_cache
+        enable_compilation_cache(os.environ["GEARTE_CACHE_DIR"], programs=False)  # the suite's JAX cache (conftest)
         s = load_study({PLANETARY!r})
         st = gearte.TEStudy(s.drive, s.errors, metric=gearte.Peak())
         out = {{}}
