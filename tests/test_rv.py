@@ -329,6 +329,20 @@ def test_the_solve_order_walks_a_grid_by_the_pins_phase_and_other_angles_by_the_
             assert np.mean(plain > 2 * np.pi / g - 1e-5) > 0.6
 
 
+def test_each_start_is_turned_with_the_drive_so_a_pin_pitch_is_one_newton_step():
+    """On a grid of z_p angles `grid_walk` goes a pin pitch at a time, and without errors the drive turned by a pin
+    pitch is the same drive. Each solve starts from the one before with every body's translation turned with the
+    output (`_response_jit`): that start is the solution but for rounding, so one Newton step ends each solve after
+    the first. (From the solution before as it stands, unturned, each takes two or three.)"""
+    from gearte.drives.rv_khv import grid_walk
+
+    walk = grid_walk(ZP - 1, ZP)
+    assert set(np.mod(np.diff(walk), ZP).tolist()) <= {1, ZP - 1}  # a pin pitch each step
+    r = make(points=ZP).response(None)
+    steps = np.asarray(r.steps)[:, walk]
+    assert np.all(steps[:, 1:] == 1), steps
+
+
 def test_gradients_match_finite_differences(drive):
     """d(lost motion)/d(tolerance) by the implicit-function theorem against float64 central differences."""
 

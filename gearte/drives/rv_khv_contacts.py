@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array
 
 from ..core.units import MM_PER_UM
@@ -138,6 +139,11 @@ def cycloid_errors(drive: RVKHV, err: dict, d: int) -> CycloidErrors:
 def dof_count(cranks: int, discs: int) -> int:
     """Coordinates of the model: sun 2, cranks 3 each, discs 3 each, carrier 3 (20 for 3 cranks and 2 discs)."""
     return 5 + 3 * (cranks + discs)
+
+
+def translations(cranks: int, discs: int) -> np.ndarray:
+    """The coordinates of every body's translation x (its y is the next one): sun, cranks, discs, carrier."""
+    return np.asarray([0] + [2 + 3 * b for b in range(cranks + discs)] + [2 + 3 * (cranks + discs)])
 
 
 def rv_system(drive: RVKHV, err: dict, theta_out, load_sign) -> ContactSystem:
@@ -244,4 +250,13 @@ def output_index(drive: RVKHV) -> int:
     return 2 + 3 * (drive.cranks + drive.discs) + 2
 
 
-__all__ = ("SHORT_LEVER", "cycloid_errors", "dof_count", "output_index", "pin_contacts", "rv_system", "single_disc_system")
+__all__ = (
+    "SHORT_LEVER",
+    "cycloid_errors",
+    "dof_count",
+    "output_index",
+    "pin_contacts",
+    "rv_system",
+    "single_disc_system",
+    "translations",
+)
