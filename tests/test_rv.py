@@ -270,7 +270,7 @@ def test_turning_the_whole_drive_by_a_pin_pitch_gives_the_same_te(drive):
 
 def test_warm_started_orders_give_the_te_of_each_angle_solved_alone():
     """Each solve starts from the one before it in `solve_order` (docs/rv.md): on a grid of 38 angles with z_c = 19 a
-    walk two angles at a time (the pins' phase, 20 θ_o, steps by 2π/38, the eccentrics' phase not at all); with one
+    walk two angles at a time (the pins' phase, 20 θ_o, steps by 2π/19, the eccentrics' phase not at all); with one
     angle moved off the grid, the eccentrics' phase order in the 19 sectors that gcd(19, 38) makes. The TE must be that
     of each angle solved alone from the nominal position, under both loads."""
     from gearte.drives.rv_khv import solve_order
