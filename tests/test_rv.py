@@ -22,8 +22,8 @@ from gearte.core.solution import RESULTS
 from gearte.drives.cycloid_pin import CycloidErrors, CycloidModification, CycloidPin, sweep
 from gearte.drives.protocol import Eccentricity
 from gearte.drives.rv_khv import RVKHV
-from gearte.drives.rv_khv_contacts import single_disc_system
-from gearte.drives.rv_khv_equilibrium import solve
+from gearte.drives.rv_khv_contacts import rv_system, single_disc_system
+from gearte.drives.rv_khv_equilibrium import _active, gradient, hessian, potential, solve
 
 ZP, R, RPIN, A = 20, 50.0, 2.5, 1.5
 POINTS = 24  # output angles of the shared grid
@@ -362,6 +362,28 @@ def test_gradients_match_finite_differences(drive):
         fd = (float(lm(x0 + e)) - float(lm(x0 - e))) / (2 * h)
         assert g[i] == pytest.approx(fd, rel=1e-5, abs=1e-12), i
     assert np.all(np.isfinite(g)) and np.any(np.abs(g) > 0)
+
+
+def test_newton_uses_the_derivatives_of_the_potential(drive):
+    """`gradient` and `hessian` (written out for speed: every row with its stiffness in one product, a bearing's
+    closed faces summed by one product) against JAX's own derivatives of `potential`, at points around a loose
+    unit's equilibrium where pins, both gear flanks and several faces of every bearing polygon are closed and others
+    open (no contact exactly on its boundary, where Φ has no second derivative)."""
+    loose = eqx.tree_at(
+        lambda d: (d.crank_disc_clearance_mm, d.crank_carrier_clearance_mm), drive, (jnp.asarray(0.004), jnp.asarray(0.003))
+    )
+    s = jax.jit(lambda e: rv_system(loose, loose.errors(e), 0.37, 1.0))(_scaled(1.0))
+    q0 = eqx.filter_jit(solve)(s).q
+    rng = np.random.default_rng(5)
+    for _ in range(4):
+        q = q0 + jnp.asarray(rng.normal(scale=2e-3, size=q0.shape))
+        closed, faces = (np.asarray(a) for a in _active(s, q))
+        assert 0 < closed.sum() < closed.size  # pins and flanks closed and open
+        assert (faces.sum(axis=1) > 1).sum() >= 3 and faces.sum(axis=1).max() < faces.shape[1]  # several faces closed
+        h, h_ref = jax.jit(hessian)(s, q), jax.jit(jax.hessian(lambda y: potential(s, y)))(q)
+        np.testing.assert_allclose(np.asarray(h), np.asarray(h_ref), rtol=0, atol=1e-12 * float(jnp.max(jnp.abs(h_ref))))
+        g, g_ref = jax.jit(gradient)(s, q), jax.jit(jax.grad(lambda y: potential(s, y)))(q)
+        np.testing.assert_allclose(np.asarray(g), np.asarray(g_ref), rtol=0, atol=1e-12 * float(jnp.max(jnp.abs(g_ref))))
 
 
 def test_the_rigid_limit_of_the_solver_is_exact_for_the_closed_contacts():

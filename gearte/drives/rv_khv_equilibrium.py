@@ -76,6 +76,8 @@ LINE_SEARCH_STEPS = 64
 _ANGLES = 2 * math.pi * np.arange(BEARING_FACES) / BEARING_FACES
 #: Unit outward normals of the faces (M × 2).
 FACE_NORMALS = np.stack([np.cos(_ANGLES), np.sin(_ANGLES)], axis=1)
+#: Each face's n nᵀ as (xx, xy, yy) (M × 3): a bearing's stiffness over its closed faces is one product with them.
+_FACE_OUTER = np.stack([FACE_NORMALS[:, 0] ** 2, FACE_NORMALS[:, 0] * FACE_NORMALS[:, 1], FACE_NORMALS[:, 1] ** 2], axis=1)
 
 
 class ContactSystem(eqx.Module):
@@ -121,17 +123,14 @@ def _normals(dtype):
 
 
 def _bearing_local(s: ContactSystem, r):
-    """Energy (b,), force vector (b × 2) and stiffness (b × 2 × 2) of every bearing at relative displacement r."""
+    """Energy (b,) and force vector (b × 2) of every bearing at relative displacement r (its stiffness: `_hessian`)."""
     N = _normals(r.dtype)
     P = r @ N.T - s.c[:, None]  # face penetrations (b × M)
     pos = jnp.maximum(P, 0.0)
     poly = s.c > 0
     energy = 0.5 * s.kb * jnp.where(poly, jnp.sum(pos * pos, axis=-1), jnp.sum(r * r, axis=-1))
     force = s.kb[:, None] * jnp.where(poly[:, None], pos @ N, r)
-    act = (P > 0).astype(r.dtype)
-    K_poly = jnp.einsum("bf,fi,fj->bij", act, N, N)
-    K = s.kb[:, None, None] * jnp.where(poly[:, None, None], K_poly, jnp.eye(2, dtype=r.dtype))
-    return energy, force, K
+    return energy, force
 
 
 def _relative(s: ContactSystem, q):
@@ -141,25 +140,39 @@ def _relative(s: ContactSystem, q):
 def potential(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, ""]:
     """Φ(q) (module notes)."""
     p = jnp.maximum(s.G @ q + s.e, 0.0)
-    energy, _, _ = _bearing_local(s, _relative(s, q))
+    energy, _ = _bearing_local(s, _relative(s, q))
     return 0.5 * jnp.sum(s.k * p * p) + jnp.sum(energy) + 0.5 * s.mu * jnp.dot(q, q) - jnp.dot(s.f, q)
 
 
 def gradient(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, " n"]:
     """∇Φ(q): generalised-force residual."""
     p = jnp.maximum(s.G @ q + s.e, 0.0)
-    _, force, _ = _bearing_local(s, _relative(s, q))
+    _, force = _bearing_local(s, _relative(s, q))
     return s.G.T @ (s.k * p) + jnp.einsum("bin,bi->n", s.B, force) + s.mu * q - s.f
 
 
 def hessian(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, "n n"]:
     """The (generalised) Hessian of Φ at q: closed contacts only (right derivative on a contact's boundary)."""
-    n = q.shape[0]
-    active = (s.G @ q + s.e > 0.0).astype(q.dtype)
-    H = (s.G.T * (s.k * active)) @ s.G
-    _, _, K = _bearing_local(s, _relative(s, q))
-    H = H + jnp.einsum("bim,bij,bjn->mn", s.B, K, s.B)
-    return H + s.mu * jnp.eye(n, dtype=q.dtype)
+    return _hessian(s, _active(s, q), q.dtype)
+
+
+def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype) -> Float[Array, "n n"]:
+    """The Hessian for the closed contacts and bearing faces `active` (`_active`): every row of the contacts and the
+    bearings with its stiffness applied, in one product, ``rowsᵀ (K rows)`` (a bearing's 2 × 2 stiffness written out;
+    ``Σ_f n_f n_fᵀ`` over its closed faces one product with `_FACE_OUTER`)."""
+    closed, faces = active
+    n = s.G.shape[1]
+    poly = s.c > 0
+    outer = faces.astype(dtype) @ jnp.asarray(_FACE_OUTER, dtype=dtype)  # b × 3
+    kxx = s.kb * jnp.where(poly, outer[:, 0], 1.0)
+    kxy = s.kb * jnp.where(poly, outer[:, 1], 0.0)
+    kyy = s.kb * jnp.where(poly, outer[:, 2], 1.0)
+    bx, by = s.B[:, 0, :], s.B[:, 1, :]
+    rows = jnp.concatenate([s.G, bx, by])
+    stiff = jnp.concatenate(
+        [(s.k * closed.astype(dtype))[:, None] * s.G, kxx[:, None] * bx + kxy[:, None] * by, kxy[:, None] * bx + kyy[:, None] * by]
+    )
+    return rows.T @ stiff + s.mu * jnp.eye(n, dtype=dtype)
 
 
 def _line_search(s: ContactSystem, q, dq):
@@ -226,26 +239,34 @@ def _newton(s: ContactSystem, q0):
     quadratic model was exact there: the step landed on the minimum), or when the residual is at rounding level."""
 
     def cond(state):
-        _, _, _, i, done = state
+        _, _, _, _, i, done = state
         return (~done) & (i < MAX_STEPS)
 
     def body(state):
-        q, g, act, i, _ = state
-        L = jnp.linalg.cholesky(hessian(s, q))
+        q, phi, g, act, i, _ = state
+        L = jnp.linalg.cholesky(_hessian(s, act, q.dtype))
         dq = -jax.scipy.linalg.cho_solve((L, True), g)
         # The full step where it decreases Φ enough (Armijo): the whole set of closed contacts may change at once.
-        full = potential(s, q + dq) <= potential(s, q) + ARMIJO * jnp.dot(g, dq)
-        t = jax.lax.cond(full, lambda: jnp.ones((), dtype=q.dtype), lambda: _line_search(s, q, dq))
+        phi_full = potential(s, q + dq)
+        full = phi_full <= phi + ARMIJO * jnp.dot(g, dq)
+
+        def searched():
+            t = _line_search(s, q, dq)
+            return t, potential(s, q + t * dq)
+
+        t, phin = jax.lax.cond(full, lambda: (jnp.ones((), dtype=q.dtype), phi_full), searched)
         qn = q + t * dq
         gn = gradient(s, qn)
         actn = _active(s, qn)
         same = jnp.all(act[0] == actn[0]) & jnp.all(act[1] == actn[1])
         done = ((t == 1.0) & same) | (jnp.max(jnp.abs(gn)) <= _rounding_floor(s, qn))
-        return qn, gn, actn, i + 1, done
+        return qn, phin, gn, actn, i + 1, done
 
+    # Carried from one iteration to the next: Φ, ∇Φ and the closed contacts at q (the Hessian is theirs).
     g0 = gradient(s, q0)
     done0 = jnp.max(jnp.abs(g0)) <= _rounding_floor(s, q0)
-    q, _, _, steps, ok = jax.lax.while_loop(cond, body, (q0, g0, _active(s, q0), jnp.asarray(0), done0))
+    state = (q0, potential(s, q0), g0, _active(s, q0), jnp.asarray(0), done0)
+    q, _, _, _, steps, ok = jax.lax.while_loop(cond, body, state)
     return q, ok, steps
 
 
@@ -277,7 +298,7 @@ def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium
     # The rigid limit: remove the part of q proportional to the load for the closed contacts.
     q_rigid = q - linalg.cho_solve(low, (s.f - s.mu * start)[:, None])[:, 0]
     force = s.k * jnp.maximum(s.G @ q + s.e, 0.0)
-    _, bf, _ = _bearing_local(s, _relative(s, q))
+    _, bf = _bearing_local(s, _relative(s, q))
     b2 = jnp.sum(bf * bf, axis=-1)
     bforce = jnp.where(b2 > 0, jnp.sqrt(jnp.where(b2 > 0, b2, 1.0)), 0.0)
     result = RESULTS.where(ok, RESULTS.successful, RESULTS.nonlinear_max_steps_reached)  # pyright: ignore[reportArgumentType]
