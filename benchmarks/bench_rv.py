@@ -8,8 +8,11 @@ The example `examples/rv_robot_joint.toml` (3 cranks, 2 discs, 40 pins, 97 outpu
   per solve (the solves of a batch run one after another: see docs/rv.md);
 - **SciPy**: the same `ContactSystem` of every angle of that unit, minimised one solve at a time by
   `scipy.optimize.minimize(method="trust-exact")` with the potential, its gradient and its (generalised) Hessian in
-  NumPy, each solve started from the previous angle's solution in gearte's order (the eccentrics' phase), gradient
-  tolerance 1e-10 of the load, then the same rigid-limit step q − H⁻¹ f; its TE is checked against gearte's.
+  NumPy, each solve started as gearte starts it (the previous angle's solution in gearte's order, `solve_order`,
+  every body's translation turned by the output's turn between the two angles), gradient tolerance 1e-10 of the
+  load or the force residual's rounding level at the start where that is larger (a preloaded unit's contact forces
+  exceed the small load by orders of magnitude, and no solver gets its residual below their rounding), then the
+  same rigid-limit step q − H⁻¹ f; its TE is checked against gearte's.
 
     python benchmarks/bench_rv.py            # writes benchmarks/results/rv.md and .json
     python benchmarks/bench_rv.py --quick    # a smoke run with small sizes (results not written)
@@ -35,8 +38,9 @@ def numpy_system(s):
 
 def scipy_solve(s, q0=None, *, gtol_rel: float = 1e-10) -> tuple:
     """Minimise the contact potential of one system with SciPy from `q0` (default: the nominal position); the gradient
-    tolerance is `gtol_rel` × the largest load term (gearte stops at the rounding level, far below: SciPy is asked for
-    less). Returns (q, q_rigid, iterations, success)."""
+    tolerance is `gtol_rel` × the largest load term, or the rounding level of the force residual at `q0` where that
+    is larger (64 machine epsilons of its largest term, gearte's own stopping level: see `rounding_level`). Returns
+    (q, q_rigid, iterations, success)."""
     import numpy as np
     from scipy.optimize import minimize
 
@@ -71,11 +75,24 @@ def scipy_solve(s, q0=None, *, gtol_rel: float = 1e-10) -> tuple:
         return H + np.einsum("bim,bij,bjn->mn", B, K, B) + mu * np.eye(q.size)
 
     q0 = np.zeros(G.shape[1]) if q0 is None else q0
-    gtol = gtol_rel * float(np.max(np.abs(f)))
+    gtol = max(gtol_rel * float(np.max(np.abs(f))), rounding_level(s, q0))
     res = minimize(fun, q0, jac=jac, hess=hess, method="trust-exact", options={"gtol": gtol, "maxiter": 2000})
     q = res.x
     q_rigid = q - np.linalg.solve(hess(q), f)
     return q, q_rigid, int(res.nit), bool(res.success)
+
+
+def rounding_level(s, q) -> float:
+    """64 machine epsilons of the largest term the force residual at q is computed from: the load, each contact's
+    k (|g|·|q| + |e|) and each bearing's k (|B| |q| + |e_b| + c)."""
+    import numpy as np
+
+    aq = np.abs(q)
+    unilateral = np.max(s["k"] * (np.abs(s["G"]) @ aq + np.abs(s["e"])), initial=0.0)
+    bearing = np.max(
+        s["kb"] * np.max(np.einsum("bin,n->bi", np.abs(s["B"]), aq) + np.abs(s["eb"]), axis=-1) + s["kb"] * s["c"], initial=0.0
+    )
+    return 64.0 * float(np.finfo(float).eps) * max(float(np.max(np.abs(s["f"]))), float(unilateral), float(bearing))
 
 
 def main(argv=None) -> int:
@@ -91,7 +108,8 @@ def main(argv=None) -> int:
 
     import gearte
     from gearte.cli.config import load_study
-    from gearte.drives.rv_khv_contacts import output_index, rv_system
+    from gearte.drives.rv_khv import solve_order
+    from gearte.drives.rv_khv_contacts import output_index, rv_system, translations
 
     study = load_study(ROOT / "examples" / "rv_robot_joint.toml")
     drive = study.drive
@@ -110,18 +128,24 @@ def main(argv=None) -> int:
     gearte.monte_carlo(fn, key=1, n_samples=n_units)
     mc, _ = best_of(lambda: gearte.monte_carlo(fn, key=1, n_samples=n_units), 1 if args.quick else 2)
 
-    # SciPy on the same systems, forward load, warm-started along the grid in the same order as gearte (the eccentrics'
-    # phase), so both get the same help; checked against gearte's TE.
+    # SciPy on the same systems, forward load, each started as gearte starts it (the previous solution in gearte's
+    # order, turned with the drive), so both get the same help; checked against gearte's TE.
     thetas = np.asarray(drive.output_angles())
-    order = np.argsort(np.mod((drive.z_pins - 1) * thetas, 2 * np.pi))
+    order = np.asarray(solve_order(drive.z_pins - 1, drive.output_angles()))
     idx = order[: (24 if args.quick else drive.points)]
     err = drive.errors(unit)
     L = float(drive.stage.pin_circle_radius)
     i = output_index(drive)
+    x = translations(drive.cranks, drive.discs)
     systems = [numpy_system(rv_system(drive, err, drive.output_angles()[j], 1.0)) for j in idx]
     t0 = time.perf_counter()
     out, q_prev = [], None
-    for s in systems:
+    for n, s in enumerate(systems):
+        if q_prev is not None:  # every body's translation turned by the output's turn since the previous angle
+            turn = thetas[idx[n]] - thetas[idx[n - 1]]
+            u, v = q_prev[x], q_prev[x + 1]
+            q_prev = q_prev.copy()
+            q_prev[x], q_prev[x + 1] = np.cos(turn) * u - np.sin(turn) * v, np.sin(turn) * u + np.cos(turn) * v
         out.append(scipy_solve(s, q_prev))
         q_prev = out[-1][0]
     scipy_t = (time.perf_counter() - t0) / len(systems)
@@ -147,7 +171,8 @@ def main(argv=None) -> int:
             f"| gearte, one unit, steady | {one * 1e3:.1f} ms | {per_solve_one * 1e6:.0f} µs |",
             f"| gearte, Monte Carlo of {n_units} units, steady | {per_unit_mc * 1e3:.1f} ms per unit | "
             f"{per_unit_mc / solves * 1e6:.0f} µs |",
-            f"| SciPy trust-exact, one solve at a time, warm-started along the grid ({len(systems)} solves, gtol 1e-10 × load) "
+            f"| SciPy trust-exact, one solve at a time, started as gearte starts it ({len(systems)} solves, gtol 1e-10 × load "
+            "or the residual's rounding level) "
             f"| | {scipy_t * 1e6:.0f} µs |",
             "",
             f"gearte's Newton iterations per solve (this unit): mean {steps.mean():.1f}, max {int(steps.max())}. "
