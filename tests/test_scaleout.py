@@ -229,3 +229,36 @@ def test_a_streamed_run_reports_exact_moments_and_bounded_percentiles(single_run
     np.testing.assert_array_equal(np.load(out / "samples_te.npy"), np.load(single_run / "samples.npz")["te"])
     assert "Streamed study" in (out / "report.md").read_text()
     assert s["typical_sample"]["index"] == held["typical_sample"]["index"]
+
+
+@pytest.mark.parametrize("streamed", [False, True])
+def test_a_process_that_does_not_write_takes_part_but_computes_no_trace_and_draws_nothing(streamed, tmp_path, monkeypatch):
+    # The processes of a several-process run other than process 0 take part in every computation that may span the
+    # processes (the Monte Carlo, the drive's study outputs) and skip what process 0 alone writes: no TE trace of the
+    # typical unit (its programs would be compiled there on every run: JAX's cache serves process 0 alone), no plot.
+    import gearte.cli.run as run_mod
+
+    calls = []
+
+    def refuse(what):
+        def fn(*args, **kwargs):
+            raise AssertionError(f"a process that does not write called {what}")
+
+        return fn
+
+    s = load_study(PLANETARY, samples=3000)
+    drive_cls = type(s.drive)
+    monkeypatch.setattr(run_mod, "_writes", lambda: False)
+    monkeypatch.setattr(drive_cls, "trace", refuse("the drive's trace"))
+    monkeypatch.setattr(run_mod, "_plots", refuse("the plots"))
+    monkeypatch.setattr(run_mod, "_draw", refuse("a figure"))
+    if streamed:  # a plain study (its drive without study outputs of its own), whose results would not be held
+        monkeypatch.setattr(run_mod, "HOLD_BYTES", 1000)
+    else:
+        monkeypatch.setattr(drive_cls, "study_outputs", lambda self, context: calls.append(len(context.values_rad)))
+    mc = run_mod.monte_carlo
+    monkeypatch.setattr(run_mod, "monte_carlo", lambda *a, **k: calls.append("monte carlo") or mc(*a, **k))
+    assert run_mod.run_study(s, tmp_path / "out", progress=False) == {}
+    # A held study's values go to the drive's study outputs (which may run Monte Carlos on every process); a streamed
+    # study has none.
+    assert calls == (["monte carlo"] if streamed else ["monte carlo", 3000])

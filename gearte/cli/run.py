@@ -25,16 +25,17 @@ import numpy as np
 
 from .. import __version__
 from ..core.metrics import AbstractMetric
-from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
+from ..core.units import UNIT_SYMBOLS, angle_from_rad
 from ..drives.protocol import AbstractDrive, AbstractSinusoidalDrive, AbstractStudyContext, Figure, StudyOutputs
 from ..studies.errors import ErrorModel, ErrorSource
 from ..studies.laws import FixedPhase, Optimised
-from ..studies.montecarlo import PERCENTILES, TEStudy, as_key, default_block_size, monte_carlo, statistics
+from ..studies.montecarlo import TEStudy, as_key, default_block_size, monte_carlo, statistics
 from ..studies.streaming import StreamingStatistics
 from .config import Study
 from .io import atomic_output_dir, commit_point, write_json, written_files
 from .kind_base import Finish, KindOutcome
 from .kinds import STUDY_KINDS
+from .run_report import report
 from .samples_file import SamplesWriter
 
 
@@ -295,10 +296,28 @@ class _TraceWarmUp:
             self.thread.join()
 
 
+def _writes() -> bool:
+    """Whether this process writes the results: always, but in a several-process run (`jax.distributed`) only
+    process 0 does (the others run into a scratch folder, `gearte.cli.main`)."""
+    return jax.process_index() == 0
+
+
+def _take_part(study: Study, values_rad: np.ndarray | None, outputs: dict, progress: bool | None) -> dict:
+    """The rest of a run on a process that does not write (`_writes`): the drive's study outputs, which may run Monte
+    Carlos over every process's devices (a streamed study has none). Not the typical unit's TE trace, the study
+    kinds' finishing steps, the plots, the report or the files: process 0 alone computes and writes these, so the
+    other processes neither compile their programs (JAX's compilation cache serves process 0 alone) nor draw."""
+    if values_rad is not None:
+        study.drive.study_outputs(RunContext(study, values_rad, outputs, progress))
+    return {}
+
+
 def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None, keep_samples: bool = False) -> dict:
     t_start = time.perf_counter()
-    # The plots' library loads in the background while the Monte Carlo computes (XLA releases the GIL).
-    threading.Thread(target=importlib.import_module, args=("matplotlib.figure",), daemon=True).start()
+    writes = _writes()
+    if writes:
+        # The plots' library loads in the background while the Monte Carlo computes (XLA releases the GIL).
+        threading.Thread(target=importlib.import_module, args=("matplotlib.figure",), daemon=True).start()
     original = study
     outcomes: list[KindOutcome] = []
     for kind in STUDY_KINDS:
@@ -314,6 +333,8 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
     streamed = _streams(study)
     if streamed:
         mc, stats, typical, stream_summary, hist = _monte_carlo_streamed(study, sampler, tmp, progress=progress, keep_samples=keep_samples)
+        if not writes:
+            return _take_part(study, None, {}, progress)
         values = values_rad = None
         outputs: dict = {}
     else:
@@ -325,10 +346,12 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
             chunk_size=study.chunk_size,
             progress=progress,
             desc=study.name,
-            on_chunk=warm.on_chunk if warm.wanted else None,
+            on_chunk=warm.on_chunk if warm.wanted and writes else None,
         )
         warm.join()
         values_rad, outputs = mc.values
+        if not writes:
+            return _take_part(study, values_rad, outputs, progress)
         values = angle_from_rad(values_rad, study.unit) if angle else values_rad
         stats = statistics(values, unit=unit)
         # A typical sample (closest to the median) for the TE trace; its draws are regenerated from its key.
@@ -478,112 +501,3 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
     summary["files"] = written_files(tmp, "summary.json")  # what gearte wrote here: a later run replaces only these
     write_json(tmp / "summary.json", summary)
     return summary
-
-
-def _fmt(x: float) -> str:
-    return f"{x:.2f}"
-
-
-def report(study: Study, s: dict, errs: dict, tr) -> str:
-    """The Markdown report of a study: result, drive, error laws, assumptions, the typical sample."""
-    sym = UNIT_SYMBOLS[study.unit]
-    te = s["te"]
-    angle = study.metric.quantity == "angle"
-    shown = f"in {study.unit} ({sym})" if angle else "in loaded pairs"
-    lines = [f"# {study.title}", ""]
-    if study.description:
-        lines += [study.description, ""]
-    lines += [
-        f"Study `{study.name}` from `{study.source_path}`, run with gearte {s['versions']['gearte']} "
-        f"(JAX {s['versions']['jax']}) on {s['created']}.",
-        "",
-    ]
-    if s["study"]["command"]:
-        lines += ["Reproduce with:", "", f"    {s['study']['command']}", ""]
-    lines += ["## Result", ""]
-    lines += [f"**Warning:** {w}." for w in s.get("warnings", ())] + ([""] if s.get("warnings") else [])
-    lines += [
-        f"{study.metric.describe()}, {shown}, over {te['n']:,} samples:",
-        "",
-        "| n | min | max | mean | std | " + " | ".join(f"P{p:g}" for p in PERCENTILES) + " |",
-        "|---" * (5 + len(PERCENTILES)) + "|",
-        f"| {te['n']:,} | {_fmt(te['min'])} | {_fmt(te['max'])} | {_fmt(te['mean'])} | {_fmt(te['std'])} | "
-        + " | ".join(_fmt(te["percentiles"][f"{p:g}"]) for p in PERCENTILES)
-        + " |",
-        "",
-        "std is the sample standard deviation (n − 1); percentiles by linear interpolation.",
-        "",
-        "![histogram](histogram.png)",
-        "",
-        "![TE trace of a typical sample](trace.png)",
-        "",
-        "## Drive",
-        "",
-        "| parameter | value |",
-        "|---|---|",
-    ]
-    lines += [f"| {k} | {v} |" for k, v in study.drive.describe()]
-    lines += [
-        "",
-        "## Error sources and how they are drawn",
-        "",
-        "Eccentricities: magnitude in µm at a phase in rad (degrees in brackets); deviations: signed values in µm or rad.",
-        "",
-        "| source | kind | phase symbol | instances | tolerance | value / magnitude | phase |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for name, e in s["errors"].items():
-        tol = "—" if e["tolerance"] is None else f"{e['tolerance']:g} {e['unit']}"
-        lines.append(f"| {name} | {e['kind']} | {e['phase_symbol']} | {e['count']} | {tol} | {e['magnitude']} | {e['phase']} |")
-    lines += [
-        "",
-        "## Assumptions",
-        "",
-        f"- Metric: {study.metric.describe()}.",
-        "- TE Δθ = θ_out − θ_in / i (rad inside gearte; reported in " + study.unit + f", 1 rad = {ARCSEC_PER_RAD:.3f}″).",
-        f"- Samples: {s['samples']:,}; seed {s['seed']}; {s['assumptions']['random_keys']}. Samples are computed in blocks of "
-        f"{s['block_size']} (one compiled program), progress shown every {s['chunk_size']}; results do not depend on the chunk size.",
-        "- Random phases are uniform on [0, 2π); magnitudes and values follow the laws in the table above.",
-        f"- Precision: {s['assumptions']['precision']}.",
-        f"- Accuracy: {s['assumptions']['accuracy']}.",
-    ]
-    lines += [f"- {n}" for n in study.notes]
-    typ = s["typical_sample"]
-    lines += [
-        "",
-        "## The typical sample",
-        "",
-        f"Sample #{typ['index']} (closest to the median): {study.metric.name} {typ['te']:.3f}{sym if angle else ''}; over "
-        f"{typ['hyper_period_input_revs']} input revolutions the TE runs from {typ['min']:.3f}{sym} "
-        f"(at θ_in = {typ['theta_min_rad']:.6f} rad) to {typ['max']:.3f}{sym} (at θ_in = {typ['theta_max_rad']:.6f} rad).",
-        "",
-        "| source | value or magnitude | phase (rad) |",
-        "|---|---|---|",
-    ]
-    for name, e in errs.items():
-        mag = e.magnitude if hasattr(e, "magnitude") else e
-        mags = ", ".join(f"{float(x):.4g}" for x in np.atleast_1d(np.asarray(mag)))
-        phs = ", ".join(f"{float(x) % (2 * math.pi):.4f}" for x in np.atleast_1d(np.asarray(e.phase))) if hasattr(e, "phase") else "—"
-        lines.append(f"| {name} | {mags} | {phs} |")
-    if tr.lines:
-        lines += [
-            "",
-            "Its TE spectrum (amplitude per frequency, frequency as a multiple of the input speed):",
-            "",
-            f"| frequency | amplitude ({sym}) |",
-            "|---|---|",
-        ]
-        lines += [f"| {f} | {angle_from_rad(a, study.unit):.3f} |" for f, a in tr.lines]
-    lines += [
-        "",
-        "## Files",
-        "",
-        "- `summary.json`: the statistics above and every setting, machine-readable.",
-        f"- `samples.npz`: the {s['samples']:,} per-sample values (`te` in {study.unit if angle else 'pairs'}, `te_rad`), "
-        "with `seed` and `index`.",
-        "- `histogram.png`, `trace.png`: the plots above.",
-        "",
-        f"Monte Carlo time {s['timing_s']['monte_carlo']:.2f} s (compilation included); total {s['timing_s']['total']:.2f} s.",
-        "",
-    ]
-    return "\n".join(lines)
