@@ -34,7 +34,8 @@ class Finish:
 class KindOutcome:
     """The result of running a kind: the study to continue with, its summary entry (under `key`),
     its figures, a report section (Markdown lines, given the final summary), and an optional
-    step after the study's own Monte Carlo."""
+    step after the study's own Monte Carlo. That step runs on the process that writes the results
+    alone (in a several-process run, process 0): it must not compute across the processes."""
 
     study: Study
     key: str
