@@ -83,16 +83,18 @@ def scipy_solve(s, q0=None, *, gtol_rel: float = 1e-10) -> tuple:
 
 
 def rounding_level(s, q) -> float:
-    """64 machine epsilons of the largest term the force residual at q is computed from: the load, each contact's
-    k (|g|·|q| + |e|) and each bearing's k (|B| |q| + |e_b| + c)."""
+    """`ROUNDING_FACTOR` (gearte's, 64) machine epsilons of the largest term the force residual at q is computed from:
+    the load, each contact's k (|g|·|q| + |e|) and each bearing's k (|B| |q| + |e_b| + c)."""
     import numpy as np
+
+    from gearte.drives.rv_khv_equilibrium import ROUNDING_FACTOR
 
     aq = np.abs(q)
     unilateral = np.max(s["k"] * (np.abs(s["G"]) @ aq + np.abs(s["e"])), initial=0.0)
     bearing = np.max(
         s["kb"] * np.max(np.einsum("bin,n->bi", np.abs(s["B"]), aq) + np.abs(s["eb"]), axis=-1) + s["kb"] * s["c"], initial=0.0
     )
-    return 64.0 * float(np.finfo(float).eps) * max(float(np.max(np.abs(s["f"]))), float(unilateral), float(bearing))
+    return ROUNDING_FACTOR * float(np.finfo(float).eps) * max(float(np.max(np.abs(s["f"]))), float(unilateral), float(bearing))
 
 
 def main(argv=None) -> int:
