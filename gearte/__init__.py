@@ -77,7 +77,10 @@ if TYPE_CHECKING:
         HelicalPlanetaryDrive as HelicalPlanetaryDrive,
         HelicalResponse as HelicalResponse,
         QuasiStatic as QuasiStatic,
+        AbstractPlanetCoupling as AbstractPlanetCoupling,
+        LoadSharing as LoadSharing,
         Planetary2KH as Planetary2KH,
+        SinglePath as SinglePath,
         SourceSpec as SourceSpec,
     )
     from .drives.rv_khv import (
@@ -283,7 +286,10 @@ _LAZY: dict[str, str] = {
     "ExplicitTerm": ".drives",
     "HarmonicDrive": ".drives",
     "HarmonicSource": ".drives",
+    "AbstractPlanetCoupling": ".drives",
+    "LoadSharing": ".drives",
     "Planetary2KH": ".drives",
+    "SinglePath": ".drives",
     "SourceSpec": ".drives",
     "DynamicResponse": ".drives.helical",
     "HelicalPlanetary": ".drives.helical",

@@ -16,6 +16,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+import gearte
 from gearte import cli
 from gearte.cli.config import load_study
 from gearte.core.signal import evaluate
@@ -105,7 +106,7 @@ def test_errors_te_with_constant_mesh_stiffness_is_the_kinematic_load_sharing_mo
         input="carrier",
         output="sun",
         fixed="ring",
-        coupling="load_sharing",
+        coupling=gearte.LoadSharing(),
     )
     errors = _errors(kin, 3)
     for scale in (1.0, 1e4):  # the example's floating sun, and every support 10⁴ × stiffer

@@ -170,8 +170,8 @@ def test_allocated_te_estimate_and_exact_peak():
 
 
 def test_load_sharing_cancels_first_harmonics_of_frame_fixed_and_sun_errors():
-    d_single = wang2013.table1_drive(coupling="single_path")
-    d_shared = wang2013.table1_drive(coupling="load_sharing")
+    d_single = wang2013.table1_drive(coupling=gearte.SinglePath())
+    d_shared = wang2013.table1_drive(coupling=gearte.LoadSharing())
     for name in ("sun_manufacturing", "ring_manufacturing", "sun_assembly", "carrier_assembly"):
         errs = {k: gearte.Eccentricity(0.0, 0.0) for k in SOURCES}
         errs[name] = gearte.Eccentricity(10.0, 0.4)
@@ -227,7 +227,8 @@ def test_profile_shifted_working_angles():
         (dict(z_sun=12, z_planet=36, z_ring=84, module=-1.0), "module"),
         (dict(z_sun=12, z_planet=36, z_ring=84, pressure_angle=20.0), "pressure_angle"),
         (dict(z_sun=12, z_planet=36, z_ring=84, output="sun"), "input, output, fixed"),
-        (dict(z_sun=12, z_planet=36, z_ring=84, coupling="mean"), "coupling"),
+        (dict(z_sun=12, z_planet=36, z_ring=84, coupling="mean"), "coupling: must be SinglePath"),
+        (dict(z_sun=12, z_planet=36, z_ring=84, coupling="load_sharing"), r"gearte.LoadSharing\(\) is 'load_sharing' in a study file"),
         (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=3, planet_angles=[0.0, 1.0]), "planet_angles"),
     ],
 )
@@ -251,7 +252,7 @@ def test_bad_errors_are_rejected_at_trace_time():
 
 def test_te_is_linear_in_small_errors_and_differentiable():
     rng = np.random.default_rng(13)
-    d = wang2013.table1_drive(coupling="load_sharing")
+    d = wang2013.table1_drive(coupling=gearte.LoadSharing())
     errs, _, _ = random_errors(rng)
     theta = np.linspace(0, 2 * PI * 24, 300)
     te = lambda s: gearte.evaluate(d.signal({k: gearte.Eccentricity(s * v.magnitude, v.phase) for k, v in errs.items()}), theta)
@@ -293,3 +294,18 @@ def test_eq9_literal_config_is_the_paper_equation():
     errs, E, ph = random_errors(rng, n_planets=1)
     errs = {k: gearte.Eccentricity(v.magnitude.reshape(-1)[0], v.phase.reshape(-1)[0]) for k, v in errs.items()}
     np.testing.assert_allclose(gearte.evaluate(s.drive.signal(errs), theta), eq9_numpy(theta, E, ph, 11 / 24), rtol=1e-10, atol=1e-16)
+
+
+@pytest.mark.parametrize("name, coupling", [("single_path", gearte.SinglePath), ("load_sharing", gearte.LoadSharing)])
+def test_a_study_files_coupling_is_the_coupling_object(tmp_path, name, coupling):
+    text = (Path(__file__).resolve().parents[1] / "examples" / "planetary_wang2013_random.toml").read_text(encoding="utf-8")
+    path = tmp_path / "study.toml"
+    path.write_text(text.replace('coupling = "single_path"', f'coupling = "{name}"'), encoding="utf-8")
+    d = load_study(path).drive
+    assert type(d.coupling) is coupling
+    # The study file's drive is the Python one: the same TE for the same errors.
+    errs, _, _ = random_errors(np.random.default_rng(5))
+    theta = np.linspace(0, 2 * PI * 24, 200)
+    ref = wang2013.table1_drive(coupling=coupling())
+    np.testing.assert_array_equal(gearte.evaluate(d.signal(errs), theta), gearte.evaluate(ref.signal(errs), theta))
+    assert ("planet coupling", coupling.description) in d.describe()

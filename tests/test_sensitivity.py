@@ -112,7 +112,7 @@ def test_interacting_inputs_against_an_independent_numpy_estimate():
     assert r.source_first_order_sum["b"] <= r.source_closed_first_order["b"] + 0.01
 
 
-@pytest.mark.parametrize("coupling", ["single_path", "load_sharing"])
+@pytest.mark.parametrize("coupling", [gearte.SinglePath(), gearte.LoadSharing()], ids=["single_path", "load_sharing"])
 def test_per_planet_sources_give_one_magnitude_and_one_phase_input_per_planet(coupling):
     d = Planetary2KH(12, 36, 84, module=1.0, pressure_angle=math.pi / 9, n_planets=3, coupling=coupling)
     law = lambda t: gearte.Rayleigh(t / 2, truncate_at=t)
@@ -131,7 +131,7 @@ def test_per_planet_sources_give_one_magnitude_and_one_phase_input_per_planet(co
     for i in range(3):
         assert f"planet_manufacturing.magnitude[{i}]" in r.inputs and f"planet_assembly.phase[{i}]" in r.inputs
     others = [j for j, lab in enumerate(r.inputs) if lab.startswith("planet_") and not lab.endswith("[0]")]
-    if coupling == "single_path":
+    if isinstance(coupling, gearte.SinglePath):
         # Planet 1's path alone sets the output: the other planets' errors change nothing at all.
         assert np.all(r.total_order[others] == 0) and np.all(r.first_order[others] == 0)
     else:

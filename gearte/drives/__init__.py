@@ -45,7 +45,13 @@ if TYPE_CHECKING:
         SlicedStiffness as SlicedStiffness,
         TransverseStiffness as TransverseStiffness,
     )
-    from .planetary_2kh import Planetary2KH as Planetary2KH, member_speeds as member_speeds
+    from .planetary_2kh import (
+        AbstractPlanetCoupling as AbstractPlanetCoupling,
+        LoadSharing as LoadSharing,
+        Planetary2KH as Planetary2KH,
+        SinglePath as SinglePath,
+        member_speeds as member_speeds,
+    )
     from .protocol import (
         AbstractDrive as AbstractDrive,
         AbstractGridDrive as AbstractGridDrive,
@@ -108,7 +114,10 @@ _LAZY = {
     "SinglePairStiffness": ".helical_stiffness",
     "SlicedStiffness": ".helical_stiffness",
     "TransverseStiffness": ".helical_stiffness",
+    "AbstractPlanetCoupling": ".planetary_2kh",
+    "LoadSharing": ".planetary_2kh",
     "Planetary2KH": ".planetary_2kh",
+    "SinglePath": ".planetary_2kh",
     "member_speeds": ".planetary_2kh",
     **dict.fromkeys(
         (

@@ -22,11 +22,13 @@ paper's example are at |ω_p − ω_c| = 7/24 ω_s, not the 11/24 printed in its
 
 from __future__ import annotations
 
+import abc
 import math
 from collections.abc import Mapping, Sequence
 from fractions import Fraction
 from typing import Any, ClassVar
 
+import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -37,7 +39,44 @@ from ..core.validate import as_float, as_int
 from .protocol import AbstractSinusoidalDrive, Eccentricity, SourceSpec
 
 MEMBERS = ("sun", "carrier", "ring")
-COUPLINGS = ("single_path", "load_sharing")
+
+
+class AbstractPlanetCoupling(eqx.Module):
+    """How the planets' paths combine into the output error of a `Planetary2KH`: the output error is the mean of
+    the paths of the planets that `paths` names, each path with its own planet's errors and its own position η_i."""
+
+    #: What the report says of the coupling.
+    description: ClassVar[str]
+
+    @abc.abstractmethod
+    def paths(self, n_planets: int) -> range:
+        """The planets (0 = planet 1) whose paths set the output."""
+
+
+class SinglePath(AbstractPlanetCoupling):
+    """Every planet behaves like planet 1, and planet 1's path alone sets the output (Wang et al. 2013's
+    assumption). Study files: ``coupling = "single_path"``."""
+
+    description: ClassVar[str] = "single path: planet 1's path alone (the paper's assumption)"
+
+    def paths(self, n_planets: int) -> range:
+        del n_planets
+        return range(1)
+
+
+class LoadSharing(AbstractPlanetCoupling):
+    """The planets share the load equally (a floating member, or equal mesh compliances): the output error is the
+    mean of the N planets' path errors, so equally spaced planets cancel the first harmonic of the sun's and the
+    ring's eccentricities. Study files: ``coupling = "load_sharing"``."""
+
+    description: ClassVar[str] = "equal load sharing: mean of the N planet paths"
+
+    def paths(self, n_planets: int) -> range:
+        return range(n_planets)
+
+
+#: The couplings by their names in study files.
+COUPLINGS: dict[str, type[AbstractPlanetCoupling]] = {"single_path": SinglePath, "load_sharing": LoadSharing}
 
 #: Error sources of the 2K-H model, their phase symbols in the paper, and whether one per planet.
 SOURCES = {
@@ -84,9 +123,9 @@ class Planetary2KH(AbstractSinusoidalDrive):
     - `centre_distance`: working centre distance, mm, for profile-shifted gears; if
       omitted the gears are standard and ``z_ring = z_sun + 2 z_planet`` is required.
     - `input`, `output`, `fixed`: members, each one of "sun", "carrier", "ring".
-    - `coupling`: "single_path" — every planet behaves like planet 1 and planet 1's
-      path alone sets the output (the paper's assumption); or "load_sharing" — the
-      planets share the load equally (floating member or equal mesh compliance), so
+    - `coupling`: `SinglePath()` (the default) — every planet behaves like planet 1 and
+      planet 1's path alone sets the output (the paper's assumption); or `LoadSharing()` —
+      the planets share the load equally (floating member or equal mesh compliance), so
       the output error is the mean of the N path errors, each with its own planet's
       errors and its own η_i (equally spaced planets then cancel the first harmonic
       of the sun and ring eccentricities).
@@ -104,7 +143,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
     input: str
     output: str
     fixed: str
-    coupling: str
+    coupling: AbstractPlanetCoupling
 
     def __init__(
         self,
@@ -120,7 +159,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
         input: str = "sun",
         output: str = "carrier",
         fixed: str = "ring",
-        coupling: str = "single_path",
+        coupling: AbstractPlanetCoupling = SinglePath(),
     ):
         zs = _as_int("z_sun", z_sun, minimum=3)
         zp = _as_int("z_planet", z_planet, minimum=3)
@@ -134,8 +173,13 @@ class Planetary2KH(AbstractSinusoidalDrive):
             raise ValueError(
                 f"input, output, fixed must be sun, carrier and ring in some order, got input={input!r}, output={output!r}, fixed={fixed!r}"
             )
-        if coupling not in COUPLINGS:
-            raise ValueError(f"coupling: must be one of {COUPLINGS}, got {coupling!r}")
+        if not isinstance(coupling, AbstractPlanetCoupling):
+            hint = (
+                f" (gearte.{COUPLINGS[coupling].__name__}() is {coupling!r} in a study file)"
+                if isinstance(coupling, str) and coupling in COUPLINGS
+                else ""
+            )
+            raise ValueError(f"coupling: must be SinglePath() or LoadSharing(), got {coupling!r}{hint}")
         if centre_distance is None:
             if zr != zs + 2 * zp:
                 raise ValueError(
@@ -230,7 +274,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
             input=t.string("input", "sun", choices=MEMBERS),
             output=t.string("output", "carrier", choices=MEMBERS),
             fixed=t.string("fixed", "ring", choices=MEMBERS),
-            coupling=t.string("coupling", "single_path", choices=COUPLINGS),
+            coupling=COUPLINGS[t.string("coupling", "single_path", choices=tuple(COUPLINGS))](),
         )
         zs, zp, zr = (t.integer(k, minimum=1) for k in ("z_sun", "z_planet", "z_ring"))
         try:
@@ -275,7 +319,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
         e = self.checked(errors)
         f = self.source_frequencies()
         aw, an = self.working_angle_external, self.working_angle_internal
-        paths = range(self.n_planets) if self.coupling == "load_sharing" else range(1)
+        paths = self.coupling.paths(self.n_planets)
         weight = 1.0 / len(paths)
         g = self._gain() * weight
         amp, phase, gain, freq, labels = [], [], [], [], []
@@ -317,13 +361,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
             ("configuration", f"{self.input} input, {self.output} output, {self.fixed} fixed"),
             ("ratio i (input/output)", f"{self.ratio} = {float(self.ratio):.6g}"),
             ("speeds (× input): sun, carrier, ring, planet", ", ".join(f"{w[k]}" for k in ("sun", "carrier", "ring", "planet"))),
-            (
-                "planet coupling",
-                {
-                    "single_path": "single path: planet 1's path alone (the paper's assumption)",
-                    "load_sharing": "equal load sharing: mean of the N planet paths",
-                }[self.coupling],
-            ),
+            ("planet coupling", self.coupling.description),
             ("output error per µm of (e_w + e_n)", f"{float(self._gain()) * ARCSEC_PER_RAD:.6g}″/µm"),
         ]
         rows += [(f"frequency of {k} on the LOA (× input speed)", str(v)) for k, v in self.source_frequencies().items()]

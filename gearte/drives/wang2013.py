@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from .explicit import ExplicitDrive, ExplicitTerm
-from .planetary_2kh import Planetary2KH
+from .planetary_2kh import AbstractPlanetCoupling, Planetary2KH, SinglePath
 
 ALPHA = math.pi / 9  # 20°, Table 1
 
@@ -27,8 +27,9 @@ TABLE3_RULE = {
 }
 
 
-def table1_drive(*, coupling: str = "single_path") -> Planetary2KH:
-    """Table 1's train: z = 12/36/84, m = 1 mm, α = π/9, three planets; sun in, carrier out, ring fixed."""
+def table1_drive(*, coupling: AbstractPlanetCoupling = SinglePath()) -> Planetary2KH:
+    """Table 1's train: z = 12/36/84, m = 1 mm, α = π/9, three planets; sun in, carrier out, ring fixed; `coupling`
+    `SinglePath()` (the paper's) or `LoadSharing()`."""
     return Planetary2KH(12, 36, 84, module=1.0, pressure_angle=ALPHA, n_planets=3, coupling=coupling)
 
 
