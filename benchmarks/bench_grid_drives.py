@@ -112,7 +112,7 @@ class NumpyCycloid:
 
         self.np = np
         zb, za = drive.z_pins, drive.z_lobes
-        self.zb, self.za, self.process = zb, za, drive.process
+        self.zb, self.za, self.flank_errors = zb, za, drive.process.flank_errors
         self.R, self.a = float(drive.pin_circle_radius), float(drive.eccentricity)
         self.r = float(drive.pin_radius)
         self.RZ, self.rZ = float(drive.wheel_pin_circle_radius), float(drive.wheel_pin_radius)
@@ -185,7 +185,7 @@ class NumpyCycloid:
             S1 = K * s * sphi / S
             Sj = (S, S1, (K * cphi - S1 * S1) / S)
         d = (g["d"], 0, 0)
-        if self.process == "generating":
+        if self.flank_errors:
             eps_c = _jlin((g["chain_cos"], Sp), (g["chain_sin"], Cp))
             delta_p = _jlin(
                 (g["pitch_sin"] * g["pitch"], Cu), (g["pitch_cos"] * g["pitch"], Su), (-g["pitch_sin"] * g["pitch"], (1.0, 0, 0))
@@ -239,7 +239,7 @@ class NumpyCycloid:
         ex = (e["setup_eccentricity"] * np.cos(e["setup_phase"]) + e["mandrel_runout"] * np.cos(e["mandrel_phase"])) * um
         ey = (e["setup_eccentricity"] * np.sin(e["setup_phase"]) + e["mandrel_runout"] * np.sin(e["mandrel_phase"])) * um
         n = self.space
-        if self.process == "generating":
+        if self.flank_errors:
             beta = beta + e["pitch_accumulated"][:, None] * np.sin(np.arange(za) * (2 * np.pi / za) + e["pitch_accumulated_phase"][:, None])
             dx, dy = 0.0, np.zeros((U, za))
             pa = np.arange(za) * (2 * np.pi / za) + e["pitch_accumulated_phase"][:, None]

@@ -50,10 +50,13 @@ if TYPE_CHECKING:
     from .core.solution import RESULTS as RESULTS, result_name as result_name
     from .core.twoscale import TwoScaleExtrema as TwoScaleExtrema, extrema_two_scale as extrema_two_scale
     from .drives import (
+        AbstractGrindingProcess as AbstractGrindingProcess,
         CycloidAnalysis as CycloidAnalysis,
         CycloidErrors as CycloidErrors,
         CycloidModification as CycloidModification,
         CycloidPin as CycloidPin,
+        FormGrinding as FormGrinding,
+        GeneratingGrinding as GeneratingGrinding,
         LoadedPairs as LoadedPairs,
         LoadedPairsMin as LoadedPairsMin,
         LostMotion as LostMotion,
@@ -273,6 +276,9 @@ _LAZY: dict[str, str] = {
     "CycloidErrors": ".drives",
     "CycloidModification": ".drives",
     "CycloidPin": ".drives",
+    "AbstractGrindingProcess": ".drives",
+    "FormGrinding": ".drives",
+    "GeneratingGrinding": ".drives",
     "LoadedPairs": ".drives",
     "LoadedPairsMin": ".drives",
     "LostMotion": ".drives",

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
+import gearte
 from gearte import cli
 from gearte.drives.cycloid_pin import CycloidErrors, CycloidPin, pitch_angles, tooth_profile
 from gearte.drives.cycloid_pin_geometry import errors_from_paper, paper_pin, paper_position, paper_tooth
@@ -44,7 +45,7 @@ def _machine_wheel_centre(phi, n, *, RZ, slide, across, crank, chain, chain_phas
 
 @pytest.mark.parametrize("space", [0, 7])
 def test_generated_flank_is_the_envelope_of_the_wheel_moved_by_the_machine(space):
-    d = stage(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88, process="generating")
+    d = stage(wheel_pin_circle_radius=194.785, wheel_pin_radius=13.88, process=gearte.GeneratingGrinding())
     um = 1e-3
     e = dict(
         dressing_x=4.0,
@@ -83,14 +84,17 @@ def test_generated_flank_is_the_envelope_of_the_wheel_moved_by_the_machine(space
 
 
 def test_generating_errors_are_refused_for_a_form_ground_disc_and_listed_for_a_generating_one():
-    form, gen = stage(), stage(process="generating")
+    form, gen = stage(), stage(process=gearte.GeneratingGrinding())
     assert len(form.error_sources) == 20 and len(gen.error_sources) == 26
     assert list(gen.error_sources)[:20] == list(form.error_sources)
     assert gen.error_sources["generating_chain"].unit == "rad" and gen.error_sources["wheel_radius"].unit == "µm"
     with pytest.raises(ValueError, match="generating-ground"):
         form.errors_dict({"wheel_radius": 2.0})
-    with pytest.raises(ValueError, match="process"):
+    with pytest.raises(ValueError, match="process: the disc is ground by FormGrinding"):
         stage(process="hobbing")
+    with pytest.raises(ValueError, match=r"gearte.GeneratingGrinding\(\) is 'generating' in a study file"):
+        stage(process="generating")
+    assert isinstance(stage().process, gearte.FormGrinding)  # the default
     # Without generating-machine errors the two processes grind the same disc.
     e = CycloidErrors(dressing_y=3.0, infeed=2.0, indexing=1e-5, setup_eccentricity=10.0, setup_phase=0.3)
     phi = np.linspace(-3, 3, 9)
@@ -208,3 +212,20 @@ def test_generating_example_reports_both_numberings(tmp_path):
     bad = p.with_name("bad.toml")
     bad.write_text(text.replace('process = "generating"', 'process = "generatin"'))
     assert cli.main(["check", str(bad)]) == 2
+
+
+@pytest.mark.parametrize("name, process", [("form", gearte.FormGrinding), ("generating", gearte.GeneratingGrinding)])
+def test_a_study_files_process_is_the_process_object(tmp_path, name, process):
+    from gearte.cli.config import ConfigError, load_study
+
+    text = (ROOT / "examples" / "cycloid_yao2001_generating.toml").read_text(encoding="utf-8")
+    assert 'process = "generating"' in text
+    p = tmp_path / "study.toml"
+    p.write_text(text.replace('process = "generating"', f'process = "{name}"'), encoding="utf-8")
+    if name == "form":  # the example's reference reducer has generating-machine errors: a form-ground disc has none
+        with pytest.raises(ConfigError, match="unknown key `pitch_accumulated_arcsec`"):
+            load_study(p)
+        return
+    d = load_study(p).drive
+    assert type(d.process) is process and d.error_fields == process.fields
+    assert ("disc ground by", process.description) in d.describe()

@@ -12,11 +12,14 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from . import cycloid_pin as cycloid_pin, harmonic as harmonic, wang2013 as wang2013
     from .cycloid_pin import (
+        AbstractGrindingProcess as AbstractGrindingProcess,
         Clearances as Clearances,
         CycloidAnalysis as CycloidAnalysis,
         CycloidErrors as CycloidErrors,
         CycloidModification as CycloidModification,
         CycloidPin as CycloidPin,
+        FormGrinding as FormGrinding,
+        GeneratingGrinding as GeneratingGrinding,
         LoadedPairs as LoadedPairs,
         LoadedPairsMin as LoadedPairsMin,
         LostMotion as LostMotion,
@@ -77,11 +80,14 @@ _SUBMODULES = ("cycloid_pin", "harmonic", "wang2013")
 _LAZY = {
     **dict.fromkeys(
         (
+            "AbstractGrindingProcess",
             "Clearances",
             "CycloidAnalysis",
             "CycloidErrors",
             "CycloidModification",
             "CycloidPin",
+            "FormGrinding",
+            "GeneratingGrinding",
             "LoadedPairs",
             "LoadedPairsMin",
             "LostMotion",

@@ -81,7 +81,7 @@ A pin can also reach the far flank of its tooth space, but only after the disc t
 through the space's width at the pin's radius; gearte, like the paper, pairs each pin
 with its own flank.
 
-**Generating grinding** (`process = "generating"`, `gearte.drives.cycloid_pin_grinding`): the wheel is one
+**Generating grinding** (`GeneratingGrinding()`, `process = "generating"` in a study file, `gearte.drives.cycloid_pin_grinding`): the wheel is one
 pin moved by the grinder's generating crank and work drive; its errors move the flank along the normal by
 e_n(φ). **The paper's numbering** (K = n − J, `paper_position`, `paper_pin`, `paper_tooth`,
 `errors_from_paper` in `gearte.drives.cycloid_pin_geometry`) and the **disc centre** held at a fixed offset or
@@ -143,8 +143,11 @@ from .cycloid_pin_geometry import (
     PER_PIN,
     PER_SPACE,
     PROCESSES,
+    AbstractGrindingProcess,
     CycloidErrors,
     CycloidModification,
+    FormGrinding,
+    GeneratingGrinding,
     _number,
     as_cycloid_errors,
     check_modification,
@@ -266,13 +269,13 @@ class CycloidAnalysis(eqx.Module):
 
 
 @functools.lru_cache(maxsize=64)
-def _error_sources(process: str, z_pins: int) -> dict[str, SourceSpec]:
+def _error_sources(process: type[AbstractGrindingProcess], z_pins: int) -> dict[str, SourceSpec]:
     """`CycloidPin.error_sources` of a disc of this process and pin count, built once (a study asks for them many
     times; callers get a copy of the dict, and `SourceSpec` is immutable)."""
     out = {}
-    for name in PROCESSES[process]:
+    for name in process.fields:
         shape = (z_pins - 1,) if name in PER_SPACE else (z_pins,) if name in PER_PIN else ()
-        symbol, text = GENERATING_SOURCE_TEXT[name] if process == "generating" and name in GENERATING_SOURCE_TEXT else SOURCE_TEXT[name]
+        symbol, text = GENERATING_SOURCE_TEXT[name] if process.flank_errors and name in GENERATING_SOURCE_TEXT else SOURCE_TEXT[name]
         out[name] = SourceSpec(name, "deviation", shape=shape, unit=ERROR_UNITS[name], symbol=symbol, description=text)
     return out
 
@@ -296,8 +299,8 @@ class CycloidPin(AbstractGridDrive):
     - `reference`: one reducer's errors to analyse in detail in study reports (a `CycloidErrors`
       or a mapping of its fields; default none), e.g. the reducer of Yao & Liang's figures 3–8.
     - `reference_record`: how a study file gave `reference` (JSON text, for summaries).
-    - `process`: how the disc is ground: ``"form"`` (Yao & Liang's form grinding, the default) or
-      ``"generating"`` (`gearte.drives.cycloid_pin_grinding`): it decides the error sources.
+    - `process`: how the disc is ground: `FormGrinding()` (Yao & Liang's form grinding, the default) or
+      `GeneratingGrinding()` (`gearte.drives.cycloid_pin_grinding`): it decides the error sources.
 
     Raises `ValueError`, naming the field, for tooth counts that do not mesh, K_1 ≥ 1,
     non-positive radii, overlapping pins, and undercut (looped) profiles.
@@ -312,7 +315,7 @@ class CycloidPin(AbstractGridDrive):
     analysis: CycloidAnalysis
     reference: CycloidErrors
     reference_record: str = eqx.field(static=True)
-    process: str = eqx.field(static=True)
+    process: AbstractGrindingProcess
 
     type_name: ClassVar[str] = "cycloid_pin"
     linear: ClassVar[bool] = False
@@ -333,10 +336,15 @@ class CycloidPin(AbstractGridDrive):
         analysis: CycloidAnalysis | None = None,
         reference: CycloidErrors | Mapping[str, Any] | None = None,
         reference_record: str | None = None,
-        process: str = "form",
+        process: AbstractGrindingProcess = FormGrinding(),
     ):
-        if process not in PROCESSES:
-            raise ValueError(f"process: the disc is ground by {' or '.join(map(repr, PROCESSES))}, got {process!r}")
+        if not isinstance(process, AbstractGrindingProcess):
+            hint = (
+                f" (gearte.{PROCESSES[process].__name__}() is {process!r} in a study file)"
+                if isinstance(process, str) and process in PROCESSES
+                else ""
+            )
+            raise ValueError(f"process: the disc is ground by FormGrinding() or GeneratingGrinding(), got {process!r}{hint}")
         self.process = process
         zb = as_int("z_pins", z_pins, minimum=4)
         za = zb - 1
@@ -434,7 +442,7 @@ class CycloidPin(AbstractGridDrive):
     def describe(self) -> list[tuple[str, str]]:
         m = self.modification
         return [
-            ("disc ground by", "generating grinding" if self.process == "generating" else "form grinding"),
+            ("disc ground by", self.process.description),
             ("pins z_b", str(self.z_pins)),
             ("lobes z_a", str(self.z_lobes)),
             ("pin-circle radius R_z", f"{float(self.pin_circle_radius):g} mm"),
@@ -453,7 +461,7 @@ class CycloidPin(AbstractGridDrive):
     def error_sources(self) -> dict[str, SourceSpec]:
         """The fields of `CycloidErrors` of the disc's process, each a signed deviation: for form grinding the 20 of
         `ERROR_FIELDS`, for generating grinding the 26 of `GENERATING_ERROR_FIELDS`, in that order."""
-        return dict(_error_sources(self.process, self.z_pins))
+        return dict(_error_sources(type(self.process), self.z_pins))
 
     def input_angles(self) -> Float[Array, " p"]:
         """The grid the metrics are taken on: `analysis.revolutions` input revolutions, `analysis.positions_per_pitch`
@@ -539,7 +547,7 @@ class CycloidPin(AbstractGridDrive):
     @property
     def error_fields(self) -> tuple[str, ...]:
         """The error fields of this disc's process (`ERROR_FIELDS` or `GENERATING_ERROR_FIELDS`)."""
-        return PROCESSES[self.process]
+        return self.process.fields
 
 
 # The public API of the cycloid-pin modules, in one place (``gearte.drives.cycloid_pin.clearances`` etc.).
@@ -553,11 +561,14 @@ __all__ = (
     "PER_SPACE",
     "PROCESSES",
     "SOURCE_TEXT",
+    "AbstractGrindingProcess",
     "Clearances",
     "CycloidAnalysis",
     "CycloidErrors",
     "CycloidModification",
     "CycloidPin",
+    "FormGrinding",
+    "GeneratingGrinding",
     "LoadedPairs",
     "LoadedPairsMin",
     "LostMotion",

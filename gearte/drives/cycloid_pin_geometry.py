@@ -10,11 +10,12 @@ Units: geometry in mm, errors in µm, angles in rad.
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import functools
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -161,7 +162,7 @@ class CycloidErrors(eqx.Module):
       pin-circle eccentricity fixed in the housing: at α_e + θ_T in the converted frame.
 
     **Generating grinding only** (`gearte.drives.cycloid_pin_grinding`; a form-ground disc ignores
-    them, and refuses them by name in a mapping). With ``process = "generating"`` the wheel is one pin of radius r_Z, and
+    them, and refuses them by name in a mapping). With `GeneratingGrinding()` the wheel is one pin of radius r_Z, and
     `dressing_x`, `dressing_y` and `infeed` are the wheel's centre offsets in the wheel-head frame
     (across; along the wheel slide, per space), no longer rigid shifts of a form wheel's profile.
 
@@ -264,8 +265,66 @@ GENERATING_ONLY = (
 ERROR_FIELDS = tuple(f for f in ALL_ERROR_FIELDS if f not in GENERATING_ONLY)
 #: The error fields of a generating-ground disc's reducer: those of form grinding, then `GENERATING_ONLY`.
 GENERATING_ERROR_FIELDS = ERROR_FIELDS + GENERATING_ONLY
-#: The grinding processes, and the error fields of each.
-PROCESSES = {"form": ERROR_FIELDS, "generating": GENERATING_ERROR_FIELDS}
+
+
+class AbstractGrindingProcess(eqx.Module):
+    """How the discs are ground: which error sources the disc has (`fields`) and how the grinding machine's errors
+    place each tooth space (`index_error`, `wheel_offsets`) or deform its flank (`flank_errors`)."""
+
+    #: The process's name in study files (``[drive] process = …``).
+    name: ClassVar[str]
+    #: What the report says.
+    description: ClassVar[str]
+    #: The error fields of a disc ground so, in order (the error sources of the drive).
+    fields: ClassVar[tuple[str, ...]]
+    #: Whether the machine's errors act along the flank (`gearte.drives.cycloid_pin_grinding.normal_deviation`).
+    flank_errors: ClassVar[bool]
+
+    @abc.abstractmethod
+    def index_error(self, err: CycloidErrors, n) -> Array:
+        """The machine's rotation of tooth space(s) n about the disc centre (rad), added to the index angle β_n."""
+
+    @abc.abstractmethod
+    def wheel_offsets(self, err: CycloidErrors, n) -> tuple[Array, Array]:
+        """The wheel's offsets that move tooth space(s) n rigidly in its own frame, (δX, δY) in mm."""
+
+
+class FormGrinding(AbstractGrindingProcess):
+    """Form grinding (Yao & Liang 2001), the default: the dressed wheel's offsets δX_4, δY_4 + ΔY_4(n) move each
+    tooth space rigidly. Study files: ``process = "form"``."""
+
+    name: ClassVar[str] = "form"
+    description: ClassVar[str] = "form grinding"
+    fields: ClassVar[tuple[str, ...]] = ERROR_FIELDS
+    flank_errors: ClassVar[bool] = False
+
+    def index_error(self, err: CycloidErrors, n) -> Array:
+        return jnp.zeros_like(err.indexing[n])
+
+    def wheel_offsets(self, err: CycloidErrors, n) -> tuple[Array, Array]:
+        return err.dressing_x * UM, (err.dressing_y + err.infeed[n]) * UM
+
+
+class GeneratingGrinding(AbstractGrindingProcess):
+    """Generating grinding (`gearte.drives.cycloid_pin_grinding`): the wheel's offsets and the machine's generating
+    errors act along the flank; the work drive's accumulated pitch error turns each tooth space rigidly. Study
+    files: ``process = "generating"``."""
+
+    name: ClassVar[str] = "generating"
+    description: ClassVar[str] = "generating grinding"
+    fields: ClassVar[tuple[str, ...]] = GENERATING_ERROR_FIELDS
+    flank_errors: ClassVar[bool] = True
+
+    def index_error(self, err: CycloidErrors, n) -> Array:
+        return rigid_pitch_error(err, n)
+
+    def wheel_offsets(self, err: CycloidErrors, n) -> tuple[Array, Array]:
+        zero = jnp.zeros_like(err.infeed[n])
+        return zero, zero
+
+
+#: The grinding processes by their names in study files.
+PROCESSES: dict[str, type[AbstractGrindingProcess]] = {"form": FormGrinding, "generating": GeneratingGrinding}
 #: Fields that are angles (rad): the index and generating-chain angles and every phase.
 ANGLE_FIELDS = ("index_offset", "indexing", "generating_chain", "pitch_accumulated")
 #: Unit of each error field, for reports.
@@ -302,12 +361,13 @@ def checked_errors(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] 
     `errors`: a `CycloidErrors`, a mapping of field names to values (the others 0), or None (no error).
     Values that are not JAX arrays are checked and broadcast in NumPy: one conversion each, in `CycloidErrors`.
     """
-    if isinstance(errors, Mapping) and getattr(drive, "process", "form") == "form":
-        wrong = sorted(set(errors) & set(GENERATING_ONLY))
+    process = getattr(drive, "process", None)  # a drive built on the cycloid geometry (RV) has form-ground discs
+    if isinstance(errors, Mapping):
+        wrong = sorted(set(errors) & set(GENERATING_ONLY) - set(ERROR_FIELDS if process is None else process.fields))
         if wrong:
             raise ValueError(
                 f"errors: {wrong} are errors of a generating-ground disc; this disc is form-ground "
-                '(give the drive process = "generating", or leave them out)'
+                '(give the drive process = "generating" in a study file, GeneratingGrinding() in Python, or leave them out)'
             )
     given = _given_errors(errors)
     out = {}
@@ -380,13 +440,11 @@ def _placement(drive: CycloidPin, err: CycloidErrors, n, side) -> _Placement:
     beta = jnp.asarray(n).astype(float) * (TWO_PI / drive.z_lobes) + err.index_offset + err.indexing[n]
     ex = err.setup_eccentricity * jnp.cos(err.setup_phase) + err.mandrel_runout * jnp.cos(err.mandrel_phase)
     ey = err.setup_eccentricity * jnp.sin(err.setup_phase) + err.mandrel_runout * jnp.sin(err.mandrel_phase)
-    if drive.process == "generating":
-        # The wheel's offsets act along the flank (normal_deviation), the work drive's error at the space centre rigidly.
-        beta = beta + rigid_pitch_error(err, n)
-        dx = dy = jnp.zeros_like(beta)
-        gen = generating_deviation(err, n)
-    else:
-        dx, dy, gen = err.dressing_x * UM, (err.dressing_y + err.infeed[n]) * UM, None
+    # A generating machine's offsets act along the flank (normal_deviation), its work drive's error rigidly.
+    process = drive.process
+    beta = beta + process.index_error(err, n)
+    dx, dy = process.wheel_offsets(err, n)
+    gen = generating_deviation(err, n) if process.flank_errors else None
     return _Placement(
         jnp.cos(side * m.rotation),
         -jnp.sin(side * m.rotation),

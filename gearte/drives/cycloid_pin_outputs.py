@@ -242,7 +242,7 @@ def reference_summary(drive: CycloidPin) -> tuple[dict, dict]:
         "input_angle_deg": math.degrees(theta0),
         "deformation_budget_mm": budget,
         "pairs": pairs,
-        "process": d.process,
+        "process": d.process.name,
         "contact_pair": _pair(d, ci, int(space[ci]), theta0, "driving"),
         "reverse_contact_pair": _pair(d, ri, int(space[ri]), theta0, "reverse"),
         "paper_J": YAO_LIANG_J,

@@ -63,7 +63,6 @@ from jaxtyping import Array, Bool, Float
 
 from ..core.units import TWO_PI
 from .cycloid_pin_geometry import UM, CycloidErrors
-from .cycloid_pin_grinding import rigid_pitch_error
 
 if TYPE_CHECKING:
     from .cycloid_pin import CycloidPin
@@ -206,14 +205,15 @@ def _geometry(drive: CycloidPin, err: CycloidErrors, pins: PinLayout, theta_T) -
     n = pins.space
     s = pins.side
     sm, cm = sincos(drive.modification.rotation)
-    beta = jnp.arange(za, dtype=float) * (TWO_PI / za) + err.index_offset + err.indexing
-    if drive.process == "generating":
-        beta = beta + rigid_pitch_error(err, jnp.arange(za))
+    process = drive.process
+    spaces = jnp.arange(za)
+    beta = jnp.arange(za, dtype=float) * (TWO_PI / za) + err.index_offset + err.indexing + process.index_error(err, spaces)
     sb, cb = sincos(beta)
     ex = (err.setup_eccentricity * jnp.cos(err.setup_phase) + err.mandrel_runout * jnp.cos(err.mandrel_phase)) * UM
     ey = (err.setup_eccentricity * jnp.sin(err.setup_phase) + err.mandrel_runout * jnp.sin(err.mandrel_phase)) * UM
-    if drive.process == "generating":
-        dx, dy = jnp.zeros(()), jnp.zeros((za,))
+    dx, dy = process.wheel_offsets(err, spaces)
+    gen = None
+    if process.flank_errors:
         spa, cpa = sincos(jnp.arange(za, dtype=float) * (TWO_PI / za) + err.pitch_accumulated_phase)
         gen = bar(
             _Generating(
@@ -229,8 +229,6 @@ def _geometry(drive: CycloidPin, err: CycloidErrors, pins: PinLayout, theta_T) -
             )
         )
         gen = eqx.tree_at(lambda e: (e.slide, e.pitch_sin, e.pitch_cos), gen, (gen.slide[n], gen.pitch_sin[n], gen.pitch_cos[n]))
-    else:
-        dx, dy, gen = err.dressing_x * UM, (err.dressing_y + err.infeed) * UM, None
     # Per tooth space (both halves): D − e^{iβ} E, and e^{iβ}; then per pin.
     vx = dx - (cb * ex - sb * ey)
     vy = dy - (sb * ex + cb * ey)

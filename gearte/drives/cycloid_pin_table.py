@@ -31,7 +31,7 @@ import numpy as np
 
 from ..core.schema import ConfigError, Table
 from ..core.units import ARCSEC_PER_RAD
-from .cycloid_pin_geometry import ANGLE_FIELDS, PER_PIN, PER_SPACE, PROCESSES, CycloidModification
+from .cycloid_pin_geometry import ANGLE_FIELDS, ERROR_FIELDS, PER_PIN, PER_SPACE, PROCESSES, CycloidModification
 
 
 def unit_of(field: str) -> str:
@@ -70,7 +70,7 @@ def drive_arguments(t: Table) -> dict[str, Any]:
         K = t.number("K1", positive=True) if t.has("K1") else None
         if a is None and K is None:
             raise ConfigError(f"{t.where}: missing `eccentricity_mm` (crank eccentricity a, mm) or `K1` (= a z_b / R_z)")
-    process = t.string("process", "form", choices=tuple(PROCESSES))
+    process = PROCESSES[t.string("process", "form", choices=tuple(PROCESSES))]()
     kw: dict[str, Any] = {"z_pins": zb, "z_lobes": zl, "pin_circle_radius": R, "pin_radius": r, "eccentricity": a, "K1": K}
     kw["process"] = process
     if t.has("wheel") and t.has("modification"):
@@ -92,7 +92,7 @@ def drive_arguments(t: Table) -> dict[str, Any]:
     # z_b − 1 spaces whatever z_lobes says (the constructor refuses z_lobes ≠ z_b − 1, naming both); sizing the
     # per-space tables by an unchecked z_lobes would let a wrong count exhaust memory before that message.
     counts = {"space": zb - 1, "pin": zb}
-    kw["reference"], given = reference_errors(_sub(t, "reference"), counts, PROCESSES[process])
+    kw["reference"], given = reference_errors(_sub(t, "reference"), counts, process.fields)
     kw["reference_record"] = json.dumps(given)
     return kw
 
@@ -141,9 +141,7 @@ def _field_key(t: Table, field: str) -> str | None:
     return want if t.has(want) else None
 
 
-def reference_errors(
-    t: Table, counts: dict[str, int], fields: tuple[str, ...] = PROCESSES["form"]
-) -> tuple[dict[str, Any], dict[str, Any]]:
+def reference_errors(t: Table, counts: dict[str, int], fields: tuple[str, ...] = ERROR_FIELDS) -> tuple[dict[str, Any], dict[str, Any]]:
     """The error fields of ``[drive.reference]`` (internal units) and how they were given (for summaries).
 
     `counts`: ``{"space": z_a, "pin": z_b}``; `fields`: the error fields of the disc's process.
