@@ -94,6 +94,8 @@ def test_generating_errors_are_refused_for_a_form_ground_disc_and_listed_for_a_g
         stage(process="hobbing")
     with pytest.raises(ValueError, match=r"gearte.GeneratingGrinding\(\) is 'generating' in a study file"):
         stage(process="generating")
+    with pytest.raises(ValueError, match=r"an instance: GeneratingGrinding\(\)"):
+        stage(process=gearte.GeneratingGrinding)
     assert isinstance(stage().process, gearte.FormGrinding)  # the default
     # Without generating-machine errors the two processes grind the same disc.
     e = CycloidErrors(dressing_y=3.0, infeed=2.0, indexing=1e-5, setup_eccentricity=10.0, setup_phase=0.3)
@@ -214,18 +216,34 @@ def test_generating_example_reports_both_numberings(tmp_path):
     assert cli.main(["check", str(bad)]) == 2
 
 
-@pytest.mark.parametrize("name, process", [("form", gearte.FormGrinding), ("generating", gearte.GeneratingGrinding)])
-def test_a_study_files_process_is_the_process_object(tmp_path, name, process):
-    from gearte.cli.config import ConfigError, load_study
+@pytest.mark.parametrize(
+    "example, name, process",
+    [
+        ("cycloid_yao2001_modified", None, gearte.FormGrinding),  # the default
+        ("cycloid_yao2001_modified", "form", gearte.FormGrinding),
+        ("cycloid_yao2001_generating", "generating", gearte.GeneratingGrinding),
+    ],
+)
+def test_a_study_files_process_is_the_process_object(tmp_path, example, name, process):
+    from gearte.cli.config import load_study
 
-    text = (ROOT / "examples" / "cycloid_yao2001_generating.toml").read_text(encoding="utf-8")
-    assert 'process = "generating"' in text
+    text = (ROOT / "examples" / f"{example}.toml").read_text(encoding="utf-8")
+    text = text.replace('process = "generating"', "")
+    assert "process =" not in text
+    if name is not None:
+        text = text.replace('type = "cycloid_pin"', f'type = "cycloid_pin"\nprocess = "{name}"', 1)
     p = tmp_path / "study.toml"
-    p.write_text(text.replace('process = "generating"', f'process = "{name}"'), encoding="utf-8")
-    if name == "form":  # the example's reference reducer has generating-machine errors: a form-ground disc has none
-        with pytest.raises(ConfigError, match="unknown key `pitch_accumulated_arcsec`"):
-            load_study(p)
-        return
+    p.write_text(text, encoding="utf-8")
     d = load_study(p).drive
     assert type(d.process) is process and d.error_fields == process.fields
     assert ("disc ground by", process.description) in d.describe()
+
+
+def test_a_generating_machines_errors_in_a_form_ground_disc_study_are_refused(tmp_path):
+    from gearte.cli.config import ConfigError, load_study
+
+    text = (ROOT / "examples" / "cycloid_yao2001_generating.toml").read_text(encoding="utf-8")
+    p = tmp_path / "study.toml"
+    p.write_text(text.replace('process = "generating"', 'process = "form"'), encoding="utf-8")
+    with pytest.raises(ConfigError, match="unknown key `pitch_accumulated_arcsec`"):
+        load_study(p)

@@ -229,6 +229,7 @@ def test_profile_shifted_working_angles():
         (dict(z_sun=12, z_planet=36, z_ring=84, output="sun"), "input, output, fixed"),
         (dict(z_sun=12, z_planet=36, z_ring=84, coupling="mean"), "coupling: must be SinglePath"),
         (dict(z_sun=12, z_planet=36, z_ring=84, coupling="load_sharing"), r"gearte.LoadSharing\(\) is 'load_sharing' in a study file"),
+        (dict(z_sun=12, z_planet=36, z_ring=84, coupling=gearte.LoadSharing), r"an instance: LoadSharing\(\)"),
         (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=3, planet_angles=[0.0, 1.0]), "planet_angles"),
     ],
 )

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import jax
 import numpy as np
@@ -61,3 +63,19 @@ def check_array_values(name: str, value, *, nonnegative: bool = False, unit: str
 def is_traced(value) -> bool:
     """Whether `value` is a JAX tracer (inside jit, grad or vmap), whose values cannot be checked in Python."""
     return isinstance(value, Tracer)
+
+
+def check_option(name: str, value, kind: type, choices: Mapping[str, type], *, what: str = "must be") -> Any:
+    """`value` if it is an instance of the option class `kind`; else a `ValueError` that names the classes to use
+    (`choices`: by their names in study files), with the instance to write where the class itself was passed, and the
+    class where its study-file name was."""
+    if isinstance(value, kind):
+        return value
+    names = " or ".join(f"{c.__name__}()" for c in choices.values())
+    if isinstance(value, str) and value in choices:
+        hint = f" (gearte.{choices[value].__name__}() is {value!r} in a study file)"
+    elif isinstance(value, type) and issubclass(value, kind):
+        hint = f" (an instance: {value.__name__}())"
+    else:
+        hint = ""
+    raise ValueError(f"{name}: {what} {names}, got {value!r}{hint}")

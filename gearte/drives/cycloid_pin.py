@@ -118,7 +118,7 @@ from jaxtyping import Array, Float
 from ..core.metrics import AbstractMetric
 from ..core.schema import ConfigError
 from ..core.units import ARCSEC_PER_RAD, TWO_PI
-from ..core.validate import as_float, as_int
+from ..core.validate import as_float, as_int, check_option
 from .cycloid_pin_contact import (
     Clearances,
     PinLayout,
@@ -338,14 +338,7 @@ class CycloidPin(AbstractGridDrive):
         reference_record: str | None = None,
         process: AbstractGrindingProcess = FormGrinding(),
     ):
-        if not isinstance(process, AbstractGrindingProcess):
-            hint = (
-                f" (gearte.{PROCESSES[process].__name__}() is {process!r} in a study file)"
-                if isinstance(process, str) and process in PROCESSES
-                else ""
-            )
-            raise ValueError(f"process: the disc is ground by FormGrinding() or GeneratingGrinding(), got {process!r}{hint}")
-        self.process = process
+        self.process = check_option("process", process, AbstractGrindingProcess, PROCESSES, what="the disc is ground by")
         zb = as_int("z_pins", z_pins, minimum=4)
         za = zb - 1
         if z_lobes is not None:

@@ -324,7 +324,7 @@ class GeneratingGrinding(AbstractGrindingProcess):
 
 
 #: The grinding processes by their names in study files.
-PROCESSES: dict[str, type[AbstractGrindingProcess]] = {"form": FormGrinding, "generating": GeneratingGrinding}
+PROCESSES: dict[str, type[AbstractGrindingProcess]] = {p.name: p for p in (FormGrinding, GeneratingGrinding)}
 #: Fields that are angles (rad): the index and generating-chain angles and every phase.
 ANGLE_FIELDS = ("index_offset", "indexing", "generating_chain", "pitch_accumulated")
 #: Unit of each error field, for reports.

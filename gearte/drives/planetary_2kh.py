@@ -35,7 +35,7 @@ from jaxtyping import Array, Float
 from ..core.schema import ConfigError, Table
 from ..core.signal import Components
 from ..core.units import ARCSEC_PER_RAD
-from ..core.validate import as_float, as_int
+from ..core.validate import as_float, as_int, check_option
 from .protocol import AbstractSinusoidalDrive, Eccentricity, SourceSpec
 
 MEMBERS = ("sun", "carrier", "ring")
@@ -45,6 +45,8 @@ class AbstractPlanetCoupling(eqx.Module):
     """How the planets' paths combine into the output error of a `Planetary2KH`: the output error is the mean of
     the paths of the planets that `paths` names, each path with its own planet's errors and its own position η_i."""
 
+    #: The coupling's name in study files (``[drive] coupling = …``).
+    name: ClassVar[str]
     #: What the report says of the coupling.
     description: ClassVar[str]
 
@@ -57,6 +59,7 @@ class SinglePath(AbstractPlanetCoupling):
     """Every planet behaves like planet 1, and planet 1's path alone sets the output (Wang et al. 2013's
     assumption). Study files: ``coupling = "single_path"``."""
 
+    name: ClassVar[str] = "single_path"
     description: ClassVar[str] = "single path: planet 1's path alone (the paper's assumption)"
 
     def paths(self, n_planets: int) -> range:
@@ -69,6 +72,7 @@ class LoadSharing(AbstractPlanetCoupling):
     mean of the N planets' path errors, so equally spaced planets cancel the first harmonic of the sun's and the
     ring's eccentricities. Study files: ``coupling = "load_sharing"``."""
 
+    name: ClassVar[str] = "load_sharing"
     description: ClassVar[str] = "equal load sharing: mean of the N planet paths"
 
     def paths(self, n_planets: int) -> range:
@@ -76,7 +80,7 @@ class LoadSharing(AbstractPlanetCoupling):
 
 
 #: The couplings by their names in study files.
-COUPLINGS: dict[str, type[AbstractPlanetCoupling]] = {"single_path": SinglePath, "load_sharing": LoadSharing}
+COUPLINGS: dict[str, type[AbstractPlanetCoupling]] = {c.name: c for c in (SinglePath, LoadSharing)}
 
 #: Error sources of the 2K-H model, their phase symbols in the paper, and whether one per planet.
 SOURCES = {
@@ -173,13 +177,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
             raise ValueError(
                 f"input, output, fixed must be sun, carrier and ring in some order, got input={input!r}, output={output!r}, fixed={fixed!r}"
             )
-        if not isinstance(coupling, AbstractPlanetCoupling):
-            hint = (
-                f" (gearte.{COUPLINGS[coupling].__name__}() is {coupling!r} in a study file)"
-                if isinstance(coupling, str) and coupling in COUPLINGS
-                else ""
-            )
-            raise ValueError(f"coupling: must be SinglePath() or LoadSharing(), got {coupling!r}{hint}")
+        coupling = check_option("coupling", coupling, AbstractPlanetCoupling, COUPLINGS)
         if centre_distance is None:
             if zr != zs + 2 * zp:
                 raise ValueError(
