@@ -146,3 +146,29 @@ def test_check_names_a_broken_file_without_importing_jax(tmp_path, text, message
     )
     status, err, loaded = fresh(code)
     assert status == 2 and message in err and loaded == [], (status, err, loaded)
+
+
+@pytest.mark.parametrize(
+    "study, status, stream, answer", [("good", 0, "stdout", ": OK ("), ("bad", 2, "stderr", "z_sun: expected a whole number")]
+)
+def test_check_prints_its_answer_and_exits_without_tearing_jax_down(tmp_path, study, status, stream, answer):
+    """`gearte check` ends at once once its answer is printed (the interpreter's teardown of JAX takes about 0.2 s of a
+    second): the answer reaches a pipe whole, with the exit status, and no exit handler runs."""
+    path = ROOT / "examples" / "planetary_wang2013_random.toml"
+    if study == "bad":
+        text = path.read_text(encoding="utf-8")
+        assert "z_sun = 12\n" in text
+        path = tmp_path / "bad.toml"
+        path.write_text(text.replace("z_sun = 12\n", 'z_sun = "x"\n'), encoding="utf-8")
+    code = (
+        "import atexit, sys\n"
+        "atexit.register(lambda: print('exit handlers ran', file=sys.stderr))\n"
+        f"sys.argv = ['gearte', 'check', {str(path)!r}]\n"
+        "from gearte_command import main\n"
+        "sys.exit(main())\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
+    assert p.returncode == status, p.stderr
+    assert answer in getattr(p, stream)
+    assert "exit handlers ran" not in p.stderr
