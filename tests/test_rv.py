@@ -386,6 +386,35 @@ def test_newton_uses_the_derivatives_of_the_potential(drive):
         np.testing.assert_allclose(np.asarray(g), np.asarray(g_ref), rtol=0, atol=1e-12 * float(jnp.max(jnp.abs(g_ref))))
 
 
+def test_reverse_and_forward_derivatives_of_a_solve_match_finite_differences():
+    """The solve's derivatives (the implicit step's JVP rule, and its transpose in reverse mode) against float64
+    central differences: of the displacement and of the rigid limit, in the errors and in the load. The rigid limit
+    does not move with the load (the contact set stays), the displacement does."""
+
+    def out(x):
+        err = CycloidErrors(pin_radius=-5.0 * x[0], pin_tangential=jnp.linspace(-3.0, 3.0, ZP) * x[1])
+        s = single_disc_system(STAGE, err, 0.1, load_sign=1.0)
+        eq = solve(eqx.tree_at(lambda t: t.f, s, s.f * x[2]))
+        return jnp.concatenate([eq.q, eq.q_rigid])
+
+    x0 = jnp.asarray([1.0, 1.0, 1.0])
+    fwd = np.asarray(jax.jit(jax.jacfwd(out))(x0))
+    rev = np.asarray(jax.jit(jax.jacrev(out))(x0))
+    h = 1e-6
+    fd = np.stack([(np.asarray(out(x0.at[i].add(h))) - np.asarray(out(x0.at[i].add(-h)))) / (2 * h) for i in range(3)], axis=1)
+    scale = np.max(np.abs(fd))
+    np.testing.assert_allclose(fwd, fd, rtol=0, atol=1e-6 * scale)
+    np.testing.assert_allclose(rev, fwd, rtol=0, atol=1e-12 * scale)
+    # In the load, by the rigid limit's definition (q affine in the load for the closed contacts): the displacement
+    # moves by its compliant part q − q_rigid, the rigid limit not at all.
+    n = fd.shape[0] // 2
+    v = np.asarray(out(x0))
+    compliant = v[:n] - v[n:]
+    assert np.max(np.abs(compliant)) > 0
+    np.testing.assert_allclose(rev[:n, 2], compliant, rtol=0, atol=1e-9 * np.max(np.abs(compliant)))
+    np.testing.assert_allclose(rev[n:, 2], 0.0, atol=1e-9 * np.max(np.abs(compliant)))
+
+
 def test_the_rigid_limit_of_the_solver_is_exact_for_the_closed_contacts():
     """The rigid-limit position satisfies the closed contacts with zero penetration (to rounding)."""
     err = CycloidErrors(pin_radius=-5.0, pin_tangential=np.linspace(-3, 3, ZP))

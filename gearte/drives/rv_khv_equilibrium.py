@@ -41,7 +41,8 @@ sharing: they are inputs of the model.
 
 **Gradients** are those of the implicit-function theorem: the iteration runs on stopped
 gradients, and one Newton step from the solution with the Hessian held carries the derivative
-−H⁻¹ ∂(∇Φ)/∂θ (no iteration is differentiated).
+−H⁻¹ ∂(∇Φ)/∂θ (no iteration is differentiated). That step's value and the rigid limit are computed where
+the iteration ends, one solve at a time (`_settled`); their derivative is a custom JVP rule (`_held`).
 
 Units: mm (forces in units of the stiffness, which is normalised), rad inside the callers.
 """
@@ -270,11 +271,45 @@ def _newton(s: ContactSystem, q0):
     return q, ok, steps
 
 
-#: `_newton`, one solve after another under `vmap` (`jax.custom_batching.sequential_vmap`): a batched while loop
-#: would run every solve of a batch for as many iterations as its slowest one. Its inputs carry no derivative (the
-#: implicit-function step in `solve` differentiates), so it needs no derivative rule of its own. Jitted: the batching
-#: rule and the shape evaluation call it again, and a jitted function is traced once.
-_newton_each = jax.custom_batching.sequential_vmap(eqx.filter_jit(_newton))
+def _settled(s: ContactSystem, q0):
+    """`_newton` from q0, then what the solution needs from its Hessian H (for the contacts closed there), one matrix
+    at a time with LAPACK: the lower Cholesky factor of H; one Newton step with H held, q = q* − H⁻¹ ∇Φ(q*) (the
+    value of the implicit-function step of `solve`); and the rigid limit q − H⁻¹ f_load, f_load = f − μ q0 (the load
+    without the regularisation's pull to the start)."""
+    q_star, ok, steps = _newton(s, q0)
+    low = jnp.linalg.cholesky(hessian(s, q_star))
+    q = q_star - jax.scipy.linalg.cho_solve((low, True), gradient(s, q_star))
+    q_rigid = q - jax.scipy.linalg.cho_solve((low, True), s.f - s.mu * q0)
+    return q_star, q, q_rigid, low, ok, steps
+
+
+#: `_settled`, one solve after another under `vmap` (`jax.custom_batching.sequential_vmap`): a batched while loop
+#: would run every solve of a batch for as many iterations as its slowest one, and one matrix at a time LAPACK is
+#: safe (see `gearte.core.linalg`). Its inputs carry no derivative (`_held` gives the implicit one), so it needs no
+#: derivative rule of its own. Jitted: the batching rule and the shape evaluation call it again, and a jitted
+#: function is traced once.
+_settled_each = jax.custom_batching.sequential_vmap(eqx.filter_jit(_settled))
+
+
+@jax.custom_jvp
+def _held(s: ContactSystem, q_star, low, start, value, rigid):
+    """`value` and `rigid` (the solve's q and rigid limit, computed by `_settled`) as functions of the system `s`:
+    their derivatives are those of one Newton step from q* with the Hessian held (the implicit-function theorem),
+    −H⁻¹ ∂(∇Φ)/∂s, and for the rigid limit also −H⁻¹ ∂f_load/∂s."""
+    del s, q_star, low, start
+    return value, rigid
+
+
+@_held.defjvp
+def _held_jvp(primals, tangents):
+    s, q_star, low, start, value, rigid = primals
+    ds = tangents[0]
+    _, dg = jax.jvp(lambda t: gradient(t, q_star), (s,), (ds,))
+    dq = -linalg.cho_solve(low, dg[:, None])[:, 0]
+    # Batched over samples and angles under `vmap`: gearte.core.linalg, not LAPACK, whose batched kernels can hang
+    # a run on several CPU devices (see that module).
+    dr = dq - linalg.cho_solve(low, (ds.f - ds.mu * start)[:, None])[:, 0]
+    return (value, rigid), (dq, dr)
 
 
 def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium:
@@ -288,15 +323,9 @@ def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium
     # The regularisation is proximal to the start: ½ μ |q − q0|² (a load μ q0 added), so a part that floats keeps its
     # position instead of being sent back to nominal across every contact in its way.
     s = eqx.tree_at(lambda t: t.f, s, s.f + s.mu * start)
-    ss = jax.tree.map(jax.lax.stop_gradient, s)
-    q_star, ok, steps = _newton_each(ss, start)
-    # Batched over samples and angles under `vmap`: gearte.core.linalg, not LAPACK, whose batched kernels can hang
-    # a run on several CPU devices (see that module). (Inside `_newton_each` a solve is one matrix: LAPACK's.)
-    low = jax.lax.stop_gradient(linalg.cholesky(hessian(ss, q_star)))
+    q_star, q, q_rigid, low, ok, steps = _settled_each(jax.tree.map(jax.lax.stop_gradient, s), start)
     # One Newton step with the Hessian held: the value stays, the derivative is the implicit one.
-    q = q_star - linalg.cho_solve(low, gradient(s, q_star)[:, None])[:, 0]
-    # The rigid limit: remove the part of q proportional to the load for the closed contacts.
-    q_rigid = q - linalg.cho_solve(low, (s.f - s.mu * start)[:, None])[:, 0]
+    q, q_rigid = _held(s, q_star, low, start, q, q_rigid)
     force = s.k * jnp.maximum(s.G @ q + s.e, 0.0)
     _, bf = _bearing_local(s, _relative(s, q))
     b2 = jnp.sum(bf * bf, axis=-1)
