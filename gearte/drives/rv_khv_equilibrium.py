@@ -123,14 +123,23 @@ def _normals(dtype):
     return jnp.asarray(FACE_NORMALS, dtype=dtype)
 
 
+def _along_normals(r):
+    """n_f · r for every face f of every bearing (… × M) from plane vectors r (… × 2): written as a product and a
+    sum rather than a matrix product with the normals, so that XLA fuses it with what uses it (on the CPU a separate
+    small matrix product costs more to launch than its arithmetic)."""
+    N = _normals(r.dtype)
+    return r[..., 0:1] * N[:, 0] + r[..., 1:2] * N[:, 1]
+
+
 def _bearing_local(s: ContactSystem, r):
     """Energy (b,) and force vector (b × 2) of every bearing at relative displacement r (its stiffness: `_hessian`)."""
     N = _normals(r.dtype)
-    P = r @ N.T - s.c[:, None]  # face penetrations (b × M)
+    P = _along_normals(r) - s.c[:, None]  # face penetrations (b × M)
     pos = jnp.maximum(P, 0.0)
     poly = s.c > 0
     energy = 0.5 * s.kb * jnp.where(poly, jnp.sum(pos * pos, axis=-1), jnp.sum(r * r, axis=-1))
-    force = s.kb[:, None] * jnp.where(poly[:, None], pos @ N, r)
+    summed = jnp.stack([jnp.sum(pos * N[:, 0], axis=-1), jnp.sum(pos * N[:, 1], axis=-1)], axis=-1)  # Σ_f pos_f n_f
+    force = s.kb[:, None] * jnp.where(poly[:, None], summed, r)
     return energy, force
 
 
@@ -164,10 +173,11 @@ def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype) -> Float[Arra
     closed, faces = active
     n = s.G.shape[1]
     poly = s.c > 0
-    outer = faces.astype(dtype) @ jnp.asarray(_FACE_OUTER, dtype=dtype)  # b × 3
-    kxx = s.kb * jnp.where(poly, outer[:, 0], 1.0)
-    kxy = s.kb * jnp.where(poly, outer[:, 1], 0.0)
-    kyy = s.kb * jnp.where(poly, outer[:, 2], 1.0)
+    outer = jnp.asarray(_FACE_OUTER, dtype=dtype)
+    closed_faces = faces.astype(dtype)
+    kxx = s.kb * jnp.where(poly, jnp.sum(closed_faces * outer[:, 0], axis=-1), 1.0)
+    kxy = s.kb * jnp.where(poly, jnp.sum(closed_faces * outer[:, 1], axis=-1), 0.0)
+    kyy = s.kb * jnp.where(poly, jnp.sum(closed_faces * outer[:, 2], axis=-1), 1.0)
     bx, by = s.B[:, 0, :], s.B[:, 1, :]
     rows = jnp.concatenate([s.G, bx, by])
     stiff = jnp.concatenate(
@@ -188,8 +198,8 @@ def _line_search(s: ContactSystem, q, dq):
     ks = jnp.where(poly, 0.0, s.kb)
     r0, rb = _relative(s, q), jnp.einsum("bin,n->bi", s.B, dq)
     # Every row as one piece a + t b with stiffness w: the unilateral contacts, then the faces of every bearing.
-    a = jnp.concatenate([s.G @ q + s.e, jnp.ravel(r0 @ N.T - s.c[:, None])])
-    b = jnp.concatenate([s.G @ dq, jnp.ravel(rb @ N.T)])
+    a = jnp.concatenate([s.G @ q + s.e, jnp.ravel(_along_normals(r0) - s.c[:, None])])
+    b = jnp.concatenate([s.G @ dq, jnp.ravel(_along_normals(rb))])
     w = jnp.concatenate([s.k, jnp.ravel(jnp.broadcast_to(kb[:, None], (kb.shape[0], N.shape[0])))])
     # The smooth part: regularisation, load and the bearings without clearance (plain springs).
     lin0 = s.mu * jnp.dot(q, dq) - jnp.dot(s.f, dq) + jnp.sum(ks * jnp.sum(r0 * rb, axis=-1))
@@ -230,8 +240,7 @@ def _rounding_floor(s: ContactSystem, q):
 
 def _active(s: ContactSystem, q):
     """Which unilateral contacts and bearing faces are closed at q."""
-    N = _normals(q.dtype)
-    faces = (_relative(s, q) @ N.T - s.c[:, None] > 0.0) & (s.c > 0)[:, None]  # a bearing without clearance has none
+    faces = (_along_normals(_relative(s, q)) - s.c[:, None] > 0.0) & (s.c > 0)[:, None]  # a bearing without clearance has none
     return s.G @ q + s.e > 0.0, faces
 
 
