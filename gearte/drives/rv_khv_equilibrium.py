@@ -247,11 +247,14 @@ def _active(s: ContactSystem, q):
 
 def _newton(s: ContactSystem, q0):
     """Newton iterations from q0. Stops when the full Newton step was taken and no contact changed state on it (the
-    quadratic model was exact there: the step landed on the minimum), or when the residual is at rounding level."""
+    quadratic model was exact there: the step landed on the minimum), or when the residual is at rounding level.
+
+    **Returns:** the solution q, whether it converged, the iterations, ∇Φ(q), and the lower Cholesky factor of the
+    Hessian at q (that of the last iteration where the closed contacts did not change on its step, as they usually
+    do not on the last one; else factored again)."""
 
     def cond(state):
-        _, _, _, _, i, done = state
-        return (~done) & (i < MAX_STEPS)
+        return (~state[-1]) & (state[4] < MAX_STEPS)
 
     # Every row of the system, transposed, once per solve. Left to `_hessian`, XLA hoists the rows out of the loop
     # untransposed and its product with them was the slowest operation of an iteration in a profile; this way the
@@ -259,7 +262,7 @@ def _newton(s: ContactSystem, q0):
     rows_t = jnp.concatenate([s.G, s.B[:, 0, :], s.B[:, 1, :]]).T
 
     def body(state):
-        q, phi, g, act, i, _ = state
+        q, phi, g, act, i, _, _, _ = state
         L = jnp.linalg.cholesky(_hessian(s, act, q.dtype, rows_t))
         dq = -jax.scipy.linalg.cho_solve((L, True), g)
         # The full step where it decreases Φ enough (Armijo): the whole set of closed contacts may change at once.
@@ -276,14 +279,18 @@ def _newton(s: ContactSystem, q0):
         actn = _active(s, qn)
         same = jnp.all(act[0] == actn[0]) & jnp.all(act[1] == actn[1])
         done = ((t == 1.0) & same) | (jnp.max(jnp.abs(gn)) <= _rounding_floor(s, qn))
-        return qn, phin, gn, actn, i + 1, done
+        return qn, phin, gn, actn, i + 1, L, same, done
 
-    # Carried from one iteration to the next: Φ, ∇Φ and the closed contacts at q (the Hessian is theirs).
+    # Carried from one iteration to the next: Φ, ∇Φ and the closed contacts at q (the Hessian is theirs), and the
+    # last factor with whether it is the Hessian's at q.
     g0 = gradient(s, q0)
     done0 = jnp.max(jnp.abs(g0)) <= _rounding_floor(s, q0)
-    state = (q0, potential(s, q0), g0, _active(s, q0), jnp.asarray(0), done0)
-    q, _, _, _, steps, ok = jax.lax.while_loop(cond, body, state)
-    return q, ok, steps
+    n = q0.shape[0]
+    no_factor = jnp.zeros((n, n), dtype=q0.dtype)
+    state = (q0, potential(s, q0), g0, _active(s, q0), jnp.asarray(0), no_factor, jnp.asarray(False), done0)
+    q, _, g, act, steps, L, fresh, ok = jax.lax.while_loop(cond, body, state)
+    L = jax.lax.cond(fresh, lambda: L, lambda: jnp.linalg.cholesky(_hessian(s, act, q.dtype, rows_t)))
+    return q, ok, steps, g, L
 
 
 def _settled(s: ContactSystem, q0):
@@ -291,9 +298,8 @@ def _settled(s: ContactSystem, q0):
     at a time with LAPACK: the lower Cholesky factor of H; one Newton step with H held, q = q* − H⁻¹ ∇Φ(q*) (the
     value of the implicit-function step of `solve`); and the rigid limit q − H⁻¹ f_load, f_load = f − μ q0 (the load
     without the regularisation's pull to the start)."""
-    q_star, ok, steps = _newton(s, q0)
-    low = jnp.linalg.cholesky(hessian(s, q_star))
-    q = q_star - jax.scipy.linalg.cho_solve((low, True), gradient(s, q_star))
+    q_star, ok, steps, g, low = _newton(s, q0)
+    q = q_star - jax.scipy.linalg.cho_solve((low, True), g)
     q_rigid = q - jax.scipy.linalg.cho_solve((low, True), s.f - s.mu * q0)
     return q_star, q, q_rigid, low, ok, steps
 
