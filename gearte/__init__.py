@@ -30,12 +30,16 @@ if TYPE_CHECKING:
     from .core.cache import default_cache_dir as default_cache_dir, enable_compilation_cache as enable_compilation_cache
     from .core.precision import enable_x64 as enable_x64, require_x64 as require_x64, x64_enabled as x64_enabled
     from .core.records import (
+        AbstractWindow as AbstractWindow,
+        FlatTopWindow as FlatTopWindow,
+        HannWindow as HannWindow,
         Record as Record,
         RecordSpectrum as RecordSpectrum,
         SpectralLines as SpectralLines,
         band_envelope as band_envelope,
         record as record,
         record_envelope as record_envelope,
+        RectangularWindow as RectangularWindow,
         record_spectrum as record_spectrum,
         spectral_lines as spectral_lines,
     )
@@ -254,6 +258,10 @@ _LAZY: dict[str, str] = {
     "enable_x64": ".core.precision",
     "require_x64": ".core.precision",
     "x64_enabled": ".core.precision",
+    "AbstractWindow": ".core.records",
+    "FlatTopWindow": ".core.records",
+    "HannWindow": ".core.records",
+    "RectangularWindow": ".core.records",
     "Record": ".core.records",
     "RecordSpectrum": ".core.records",
     "SpectralLines": ".core.records",

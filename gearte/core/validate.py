@@ -65,15 +65,18 @@ def is_traced(value) -> bool:
     return isinstance(value, Tracer)
 
 
-def check_option(name: str, value, kind: type, choices: Mapping[str, type], *, what: str = "must be") -> Any:
+def check_option(
+    name: str, value, kind: type, choices: Mapping[str, type], *, what: str = "must be", named: str | None = "in a study file"
+) -> Any:
     """`value` if it is an instance of the option class `kind`; else a `ValueError` that names the classes to use
-    (`choices`: by their names in study files), with the instance to write where the class itself was passed, and the
-    class where its study-file name was."""
+    (`choices`: by their names, `named` where they are written so, e.g. in study files; None: nowhere but here), with
+    the instance to write where the class itself was passed, and the class where its name was."""
     if isinstance(value, kind):
         return value
     names = " or ".join(f"{c.__name__}()" for c in choices.values())
     if isinstance(value, str) and value in choices:
-        hint = f" (gearte.{choices[value].__name__}() is {value!r} in a study file)"
+        cls = choices[value].__name__
+        hint = f" (gearte.{cls}() is {value!r} {named})" if named else f" (for {value!r}, write gearte.{cls}())"
     elif isinstance(value, type) and issubclass(value, kind):
         hint = f" (an instance: {value.__name__}())"
     else:

@@ -21,7 +21,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..core.extrema import spectrum
-from ..core.records import Record, record_spectrum, spectral_lines, spectrum_peaks
+from ..core.records import HannWindow, Record, record_spectrum, spectral_lines, spectrum_peaks
 from ..core.signal import TESignal
 from ..core.units import ARCSEC_PER_RAD
 from .harmonic_sources import CLASSES, LIU_ARCSEC_PER_UM_MM, class_label, finite
@@ -225,7 +225,7 @@ def labelled_lines(drive: HarmonicDrive, rec: Record, *, count: int = 8, signal:
             entry["model_freq_cpm"], entry["model_amplitude_arcsec"] = model[cls]
         out.append(entry)
     if len(out) < count:
-        spec = record_spectrum(rec, window="hann", zero_pad=8)
+        spec = record_spectrum(rec, window=HannWindow(), zero_pad=8)
         # Exclude each line's Hann main lobe (±2 bins); its side lobes are the next peaks an analyser shows.
         peaks = spectrum_peaks(spec, exclude_cpm=list(found.freq_cpm), exclude_bins=2.0, count=count - len(out))
         real = list(out)

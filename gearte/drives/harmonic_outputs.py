@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import jax.numpy as jnp
 import numpy as np
 
-from ..core.records import band_envelope, record, record_envelope, record_spectrum
+from ..core.records import HannWindow, band_envelope, record, record_envelope, record_spectrum
 from ..core.signal import evaluate
 from ..core.solution import RESULTS, is_successful, result_name
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
@@ -366,8 +366,8 @@ def _typical_unit(drive: HarmonicDrive, errs: dict, typical: int, unit: str) -> 
             "TE record with its beat envelope",
         )
     )
-    spec = record_spectrum(rec, window="hann")
-    zoom = record_spectrum(rec, window="hann", zero_pad=8)
+    spec = record_spectrum(rec, window=HannWindow())
+    zoom = record_spectrum(rec, window=HannWindow(), zero_pad=8)
     marks = [
         (
             e["freq_cpm"],
