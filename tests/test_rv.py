@@ -23,7 +23,7 @@ from gearte.drives.cycloid_pin import CycloidErrors, CycloidModification, Cycloi
 from gearte.drives.protocol import Eccentricity
 from gearte.drives.rv_khv import RVKHV
 from gearte.drives.rv_khv_contacts import rv_system, single_disc_system
-from gearte.drives.rv_khv_equilibrium import _active, gradient, hessian, potential, solve
+from gearte.drives.rv_khv_equilibrium import ContactSystem, _active, _line_search, gradient, hessian, potential, solve
 
 ZP, R, RPIN, A = 20, 50.0, 2.5, 1.5
 POINTS = 24  # output angles of the shared grid
@@ -413,6 +413,51 @@ def test_reverse_and_forward_derivatives_of_a_solve_match_finite_differences():
     assert np.max(np.abs(compliant)) > 0
     np.testing.assert_allclose(rev[:n, 2], compliant, rtol=0, atol=1e-9 * np.max(np.abs(compliant)))
     np.testing.assert_allclose(rev[n:, 2], 0.0, atol=1e-9 * np.max(np.abs(compliant)))
+
+
+def test_the_line_search_finds_the_minimum_along_any_descent_direction(drive):
+    """`_line_search` against the root of φ′(t) = ∇Φ(q + t dq)·dq found by bisection, along random descent directions
+    from points around a loose unit's equilibrium (pins, flanks and bearing faces opening and closing on the way)."""
+    loose = eqx.tree_at(
+        lambda d: (d.crank_disc_clearance_mm, d.crank_carrier_clearance_mm), drive, (jnp.asarray(0.004), jnp.asarray(0.003))
+    )
+    s = jax.jit(lambda e: rv_system(loose, loose.errors(e), 0.37, 1.0))(_scaled(1.0))
+    q0 = np.asarray(eqx.filter_jit(solve)(s).q)
+    search = jax.jit(_line_search)
+    slope = jax.jit(lambda q, dq, t: jnp.dot(gradient(s, q + t * dq), dq))
+    rng = np.random.default_rng(11)
+    for _ in range(12):
+        q = jnp.asarray(q0 + rng.normal(scale=1e-3, size=q0.shape))
+        dq = jnp.asarray(rng.normal(scale=1e-3, size=q0.shape))
+        if float(slope(q, dq, 0.0)) > 0:
+            dq = -dq
+        lo, hi = 0.0, 1e-3
+        while float(slope(q, dq, hi)) <= 0:
+            lo, hi = hi, 2 * hi
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if float(slope(q, dq, mid)) <= 0 else (lo, mid)
+        assert float(search(s, q, dq)) == pytest.approx(0.5 * (lo + hi), rel=1e-9)
+
+
+@pytest.mark.parametrize("step, t_min", [(-1.0, 0.5), (-4.0, 0.125)])
+def test_the_line_search_finds_a_minimum_that_lies_before_the_first_kink(step, t_min):
+    """Two opposed contacts on one coordinate, p = 1 ± q, both closed at q = 0.5: Φ = ½(1 + q)² + ½(1 − q)² is least at
+    q = 0, before the first kink (q = −1) along dq = −1 or −4; the walk, which starts at the first kink (or t = 1),
+    must come back."""
+    s = ContactSystem(
+        G=jnp.asarray([[1.0], [-1.0]]),
+        e=jnp.asarray([1.0, 1.0]),
+        k=jnp.asarray([1.0, 1.0]),
+        B=jnp.zeros((1, 2, 1)),
+        eb=jnp.zeros((1, 2)),
+        c=jnp.zeros(1),
+        kb=jnp.zeros(1),
+        f=jnp.zeros(1),
+        mu=jnp.asarray(1e-12),
+    )
+    t = float(jax.jit(_line_search)(s, jnp.asarray([0.5]), jnp.asarray([step])))
+    assert t == pytest.approx(t_min, rel=1e-12)  # μ q vanishes at q = 0
 
 
 def test_the_rigid_limit_of_the_solver_is_exact_for_the_closed_contacts():
