@@ -199,10 +199,10 @@ def main(argv=None) -> int:
     per_solve_one = one / solves
     per_unit_mc = mc / n_units
     units_360 = 8 if args.quick else 32
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    runs_360 = [monte_carlo_360(units_360, d) for d in sorted({1, cores})]
+    machine = machine_info()
+    runs_360 = [monte_carlo_360(units_360, d) for d in sorted({1, int(machine["usable_cores"] or 1)})]
     rows_360 = [
-        f"| {r['devices']} | {r['seconds'] / units_360 * 1e3:.0f} ms | {r['seconds'] / units_360 / 720 * 1e6:.0f} µs | "
+        f"| {r['devices']} | {r['seconds'] / units_360 * 1e3:.0f} ms | {r['seconds'] / units_360 / (2 * 360) * 1e6:.0f} µs | "
         f"{r['seconds'] / units_360 * 1e4 / 60:.1f} min |"
         for r in runs_360
     ]
@@ -211,7 +211,7 @@ def main(argv=None) -> int:
             "# RV (K-H-V) equilibrium solves: gearte against SciPy",
             "",
             f"Example `examples/rv_robot_joint.toml`, {drive.points} output angles × 2 loads = {solves} solves per unit; "
-            f"load average {os.getloadavg()[0]:.1f} at the start ({machine_info().get('cpu', '')}).",
+            f"load average {os.getloadavg()[0]:.1f} at the start ({machine.get('cpu', '')}).",
             "",
             "| | time | per solve |",
             "|---|---|---|",
@@ -250,7 +250,7 @@ def main(argv=None) -> int:
         "te_agreement_share": agree,
         "te_max_difference_rad": float(diff.max()),
         "monte_carlo_360": {"units": units_360, "runs": runs_360},
-        "machine": machine_info(),
+        "machine": machine,
     }
     write_results("rv", md, result, quick=args.quick)
     return 0

@@ -35,11 +35,11 @@ if TYPE_CHECKING:
         HannWindow as HannWindow,
         Record as Record,
         RecordSpectrum as RecordSpectrum,
+        RectangularWindow as RectangularWindow,
         SpectralLines as SpectralLines,
         band_envelope as band_envelope,
         record as record,
         record_envelope as record_envelope,
-        RectangularWindow as RectangularWindow,
         record_spectrum as record_spectrum,
         spectral_lines as spectral_lines,
     )

@@ -437,7 +437,7 @@ def test_the_line_search_finds_the_minimum_along_any_descent_direction(drive):
         for _ in range(200):
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if float(slope(q, dq, mid)) <= 0 else (lo, mid)
-        assert float(search(s, q, dq)) == pytest.approx(0.5 * (lo + hi), rel=1e-9)
+        assert float(search(s, q, dq)) == pytest.approx(0.5 * (lo + hi), rel=1e-9, abs=0)
 
 
 @pytest.mark.parametrize("step, t_min", [(-1.0, 0.5), (-4.0, 0.125)])
@@ -457,7 +457,7 @@ def test_the_line_search_finds_a_minimum_that_lies_before_the_first_kink(step, t
         mu=jnp.asarray(1e-12),
     )
     t = float(jax.jit(_line_search)(s, jnp.asarray([0.5]), jnp.asarray([step])))
-    assert t == pytest.approx(t_min, rel=1e-12)  # μ q vanishes at q = 0
+    assert t == pytest.approx(t_min, rel=1e-12, abs=0)  # μ q vanishes at q = 0
 
 
 def test_the_rigid_limit_of_the_solver_is_exact_for_the_closed_contacts():

@@ -168,8 +168,9 @@ class RecordSpectrum(eqx.Module):
     `freq_cpm` in cycles per minute; `amplitude` in rad (the record's unit), scaled by
     the window's coherent gain so that a sinusoid of amplitude A at a bin centre reads A
     (between bins up to the window's `scalloping_db` less: 15 % with the Hann window, 0.11 %
-    with the flat-top; or read line amplitudes from `spectral_lines`). `resolution_cpm` is the record's bin spacing (60 / duration);
-    with zero padding the points are `zero_pad` times denser than that.
+    with the flat-top; or read line amplitudes from `spectral_lines`). `resolution_cpm` is the
+    record's bin spacing (60 / duration); with zero padding the points are `zero_pad` times
+    denser than that.
     """
 
     freq_cpm: np.ndarray

@@ -166,10 +166,16 @@ def hessian(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, "n n"]:
     return _hessian(s, _active(s, q), q.dtype)
 
 
+def _rows_t(s: ContactSystem) -> Float[Array, "n r"]:
+    """Every row of the system, transposed (n × (m + 2b)): the unilateral contacts, then every bearing's x row, then
+    its y row."""
+    return jnp.concatenate([s.G, s.B[:, 0, :], s.B[:, 1, :]]).T
+
+
 def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype, rows_t=None) -> Float[Array, "n n"]:
     """The Hessian for the closed contacts and bearing faces `active` (`_active`): every row of the contacts and the
     bearings with its stiffness applied, in one product, ``rowsᵀ (K rows)`` (a bearing's 2 × 2 stiffness written out;
-    ``Σ_f n_f n_fᵀ`` over its closed faces summed with `_FACE_OUTER`). `rows_t`: ``rowsᵀ``, if already built."""
+    ``Σ_f n_f n_fᵀ`` over its closed faces summed with `_FACE_OUTER`). `rows_t`: `_rows_t`, if already built."""
     closed, faces = active
     n = s.G.shape[1]
     poly = s.c > 0
@@ -180,7 +186,7 @@ def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype, rows_t=None) 
     kyy = s.kb * jnp.where(poly, jnp.sum(closed_faces * outer[:, 2], axis=-1), 1.0)
     bx, by = s.B[:, 0, :], s.B[:, 1, :]
     if rows_t is None:
-        rows_t = jnp.concatenate([s.G, bx, by]).T
+        rows_t = _rows_t(s)
     stiff = jnp.concatenate(
         [(s.k * closed.astype(dtype))[:, None] * s.G, kxx[:, None] * bx + kxy[:, None] * by, kxy[:, None] * bx + kyy[:, None] * by]
     )
@@ -189,8 +195,8 @@ def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype, rows_t=None) 
 
 def _line_search(s: ContactSystem, q, dq):
     """The step t > 0 that minimises Φ(q + t dq), exactly: φ′(t) is piecewise linear and increasing, with a kink
-    wherever a unilateral contact or a bearing face opens or closes. From t = 0 the walk takes the root of φ′ on the
-    piece it stands on if that root lies before the next kink, or moves to that kink; each step crosses one kink
+    wherever a unilateral contact or a bearing face opens or closes. From its start (see below) the walk takes the
+    root of φ′ on the piece it stands on if that root lies before the next kink, or moves to that kink; each step crosses one kink
     (a contact that closes usually stops the walk at once). Out of steps: the last kink reached (φ decreases up to
     it)."""
     N = _normals(q.dtype)
@@ -262,12 +268,13 @@ def _newton(s: ContactSystem, q0):
     do not on the last one; else factored again)."""
 
     def cond(state):
-        return (~state[-1]) & (state[4] < MAX_STEPS)
+        _, _, _, _, i, _, _, done = state
+        return (~done) & (i < MAX_STEPS)
 
-    # Every row of the system, transposed, once per solve. Left to `_hessian`, XLA hoists the rows out of the loop
-    # untransposed and its product with them was the slowest operation of an iteration in a profile; this way the
-    # 16 units at 360 angles of docs/rv.md take 0.164 s per unit instead of 0.177.
-    rows_t = jnp.concatenate([s.G, s.B[:, 0, :], s.B[:, 1, :]]).T
+    # The rows, transposed, once per solve. Left to `_hessian`, XLA hoists the rows out of the loop untransposed and
+    # its product with them was the slowest operation of an iteration in a profile; this way the 16 units at 360
+    # angles of docs/rv.md take 0.164 s per unit instead of 0.177.
+    rows_t = _rows_t(s)
 
     def body(state):
         q, phi, g, act, i, _, _, _ = state
@@ -334,9 +341,9 @@ def _held_jvp(primals, tangents):
     s, q_star, low, start, value, rigid = primals
     ds = tangents[0]
     _, dg = jax.jvp(lambda t: gradient(t, q_star), (s,), (ds,))
-    dq = -linalg.cho_solve(low, dg[:, None])[:, 0]
     # Batched over samples and angles under `vmap`: gearte.core.linalg, not LAPACK, whose batched kernels can hang
     # a run on several CPU devices (see that module).
+    dq = -linalg.cho_solve(low, dg[:, None])[:, 0]
     dr = dq - linalg.cho_solve(low, (ds.f - ds.mu * start)[:, None])[:, 0]
     return (value, rigid), (dq, dr)
 
