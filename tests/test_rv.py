@@ -500,3 +500,32 @@ def test_best_planet_assembly_is_a_coordinate_optimum_of_the_units_te():
             other = teeth.copy()
             other[i] = k
             assert pp(other) >= float(out.value) * (1 - 1e-9), (i, k)
+
+
+@pytest.mark.parametrize("op, fill", [(jnp.sum, 0.0), (jnp.min, np.inf), (jnp.max, -np.inf)])
+@pytest.mark.parametrize("n", [1, 31, 32, 33, 64, 86, 726])
+def test_reductions_written_in_slices_equal_the_plain_ones(op, fill, n):
+    """`_reduce` (slices of 32 combined, then one reduction) against NumPy over the last axis, for lengths on both
+    sides of the slice and with padding: min and max exactly, sums to rounding."""
+    from gearte.drives.rv_khv_equilibrium import _reduce
+
+    x = np.random.default_rng(n).normal(size=(3, n))
+    got = np.asarray(jax.jit(lambda v: _reduce(op, v, fill))(jnp.asarray(x)))
+    want = {jnp.sum: np.sum, jnp.min: np.min, jnp.max: np.max}[op](x, axis=-1)
+    np.testing.assert_allclose(got, want, rtol=1e-14 if op is jnp.sum else 0, atol=0)
+    flags = np.arange(n) != n // 2
+    assert not bool(jax.jit(lambda v: _reduce(jnp.all, v, True))(jnp.asarray(flags)))
+    assert bool(jax.jit(lambda v: _reduce(jnp.all, v, True))(jnp.ones(n, dtype=bool)))
+
+
+def test_the_newton_iteration_compiles_without_windowed_reductions(drive):
+    """XLA's CPU compiler turns a reduction over more than 32 elements into a windowed reduction, an operation of its
+    own (about half a microsecond each on the CPU, a dozen per iteration before `_reduce`); the compiled Newton
+    iteration of a drive with 20 pins per disc and 64-face bearings has none."""
+    from gearte.drives.rv_khv_equilibrium import _newton
+
+    s = jax.jit(lambda e: rv_system(drive, drive.errors(e), 0.37, 1.0))(_scaled(1.0))
+    assert s.G.shape[0] > 32 and s.c.shape[0] * 64 > 32  # long axes: the rewrite would apply
+    text = jax.jit(_newton).lower(s, jnp.zeros_like(s.f)).compile().as_text()
+    assert "while" in text
+    assert "reduce-window" not in text

@@ -81,6 +81,37 @@ FACE_NORMALS = np.stack([np.cos(_ANGLES), np.sin(_ANGLES)], axis=1)
 _FACE_OUTER = np.stack([FACE_NORMALS[:, 0] ** 2, FACE_NORMALS[:, 0] * FACE_NORMALS[:, 1], FACE_NORMALS[:, 1] ** 2], axis=1)
 
 
+#: XLA's CPU compiler rewrites a reduction over an axis longer than this into a windowed reduction (a pairwise-like
+#: summation), an operation of its own that fuses with nothing around it and costs about half a microsecond to launch,
+#: more than it computes here. Reductions over axes of at most this length stay inside the fusion of what they reduce
+#: (`_reduce`).
+_FUSED_AXIS = 32
+_COMBINE = {jnp.sum: jnp.add, jnp.min: jnp.minimum, jnp.max: jnp.maximum, jnp.all: jnp.logical_and}
+
+
+def _reduce(op, x, fill):
+    """`op` (``jnp.sum``, ``jnp.min``, ``jnp.max`` or ``jnp.all``) over the last axis of x: its slices of
+    `_FUSED_AXIS` combined elementwise (the axis padded with `fill`, the identity of `op`), then one reduction over
+    `_FUSED_AXIS`. Written as a reshape and a reduction over two axes instead, XLA folds it back into one long one."""
+    n = x.shape[-1]
+    if n <= _FUSED_AXIS:
+        return op(x, axis=-1)
+    m = -(-n // _FUSED_AXIS)
+    pad = m * _FUSED_AXIS - n
+    if pad:
+        x = jnp.concatenate([x, jnp.full((*x.shape[:-1], pad), fill, dtype=x.dtype)], axis=-1)
+    combine = _COMBINE[op]
+    acc = x[..., :_FUSED_AXIS]
+    for i in range(1, m):
+        acc = combine(acc, x[..., i * _FUSED_AXIS : (i + 1) * _FUSED_AXIS])
+    return op(acc, axis=-1)
+
+
+def _sum(x):
+    """Σ over the last axis (`_reduce`)."""
+    return _reduce(jnp.sum, x, 0)
+
+
 class ContactSystem(eqx.Module):
     """The contacts of one configuration (one input angle), linear in the small displacements q (n coordinates, mm).
 
@@ -137,8 +168,8 @@ def _bearing_local(s: ContactSystem, r):
     P = _along_normals(r) - s.c[:, None]  # face penetrations (b × M)
     pos = jnp.maximum(P, 0.0)
     poly = s.c > 0
-    energy = 0.5 * s.kb * jnp.where(poly, jnp.sum(pos * pos, axis=-1), jnp.sum(r * r, axis=-1))
-    summed = jnp.stack([jnp.sum(pos * N[:, 0], axis=-1), jnp.sum(pos * N[:, 1], axis=-1)], axis=-1)  # Σ_f pos_f n_f
+    energy = 0.5 * s.kb * jnp.where(poly, _sum(pos * pos), jnp.sum(r * r, axis=-1))
+    summed = jnp.stack([_sum(pos * N[:, 0]), _sum(pos * N[:, 1])], axis=-1)  # Σ_f pos_f n_f
     force = s.kb[:, None] * jnp.where(poly[:, None], summed, r)
     return energy, force
 
@@ -151,7 +182,7 @@ def potential(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, ""]:
     """Φ(q) (module notes)."""
     p = jnp.maximum(s.G @ q + s.e, 0.0)
     energy, _ = _bearing_local(s, _relative(s, q))
-    return 0.5 * jnp.sum(s.k * p * p) + jnp.sum(energy) + 0.5 * s.mu * jnp.dot(q, q) - jnp.dot(s.f, q)
+    return 0.5 * _sum(s.k * p * p) + jnp.sum(energy) + 0.5 * s.mu * jnp.dot(q, q) - jnp.dot(s.f, q)
 
 
 def gradient(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, " n"]:
@@ -181,9 +212,9 @@ def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype, rows_t=None) 
     poly = s.c > 0
     outer = jnp.asarray(_FACE_OUTER, dtype=dtype)
     closed_faces = faces.astype(dtype)
-    kxx = s.kb * jnp.where(poly, jnp.sum(closed_faces * outer[:, 0], axis=-1), 1.0)
-    kxy = s.kb * jnp.where(poly, jnp.sum(closed_faces * outer[:, 1], axis=-1), 0.0)
-    kyy = s.kb * jnp.where(poly, jnp.sum(closed_faces * outer[:, 2], axis=-1), 1.0)
+    kxx = s.kb * jnp.where(poly, _sum(closed_faces * outer[:, 0]), 1.0)
+    kxy = s.kb * jnp.where(poly, _sum(closed_faces * outer[:, 1]), 0.0)
+    kyy = s.kb * jnp.where(poly, _sum(closed_faces * outer[:, 2]), 1.0)
     bx, by = s.B[:, 0, :], s.B[:, 1, :]
     if rows_t is None:
         rows_t = _rows_t(s)
@@ -222,11 +253,11 @@ def _line_search(s: ContactSystem, q, dq):
 
         def body(state):
             t, k, _, _ = state
-            nxt = jnp.min(jnp.where(kink > t, kink, jnp.inf))
+            nxt = _reduce(jnp.min, jnp.where(kink > t, kink, jnp.inf), jnp.inf)
             mid = jnp.where(jnp.isfinite(nxt), 0.5 * (t + nxt), t + 1.0)
             p = a + t * b
-            d1 = jnp.sum(w * jnp.maximum(p, 0.0) * b) + lin0 + t * lin1
-            slope = jnp.sum(jnp.where(a + mid * b > 0, w * b * b, 0.0)) + lin1
+            d1 = _sum(w * jnp.maximum(p, 0.0) * b) + lin0 + t * lin1
+            slope = _sum(jnp.where(a + mid * b > 0, w * b * b, 0.0)) + lin1
             root = t - d1 / slope
             done = root <= nxt
             behind = (k == 0) & (t > 0) & (d1 > 0)  # φ already rises at the start: the root lies before it
@@ -239,7 +270,7 @@ def _line_search(s: ContactSystem, q, dq):
     # the minimum of the piece before it. So the walk starts at the first kink (or 1): the same root as from t = 0,
     # one step sooner (0.7 µs of 6 per search); where φ′ > 0 there already (the start's own contact state differs
     # from the Hessian's), it walks again from 0.
-    t, behind = walk(jnp.minimum(jnp.min(jnp.where(kink > 0, kink, jnp.inf)), 1.0))
+    t, behind = walk(jnp.minimum(_reduce(jnp.min, jnp.where(kink > 0, kink, jnp.inf), jnp.inf), 1.0))
     return jax.lax.cond(behind, lambda: walk(zero)[0], lambda: t)
 
 
@@ -247,7 +278,7 @@ def _rounding_floor(s: ContactSystem, q):
     """The rounding level of the force residual at q: eps × the largest magnitude it is computed from (the load, the
     contact terms k (|G||q| + |e|), the bearing terms)."""
     aq = jnp.abs(q)
-    unilateral = jnp.max(s.k * (jnp.abs(s.G) @ aq + jnp.abs(s.e)), initial=0.0)
+    unilateral = jnp.maximum(_reduce(jnp.max, s.k * (jnp.abs(s.G) @ aq + jnp.abs(s.e)), 0.0), 0.0)
     bearing = jnp.max(s.kb * jnp.max(jnp.einsum("bin,n->bi", jnp.abs(s.B), aq) + jnp.abs(s.eb), axis=-1) + s.kb * s.c, initial=0.0)
     scale = jnp.maximum(jnp.max(jnp.abs(s.f)), jnp.maximum(unilateral, bearing))
     return ROUNDING_FACTOR * jnp.finfo(q.dtype).eps * scale
@@ -292,7 +323,7 @@ def _newton(s: ContactSystem, q0):
         qn = q + t * dq
         gn = gradient(s, qn)
         actn = _active(s, qn)
-        same = jnp.all(act[0] == actn[0]) & jnp.all(act[1] == actn[1])
+        same = _reduce(jnp.all, act[0] == actn[0], True) & jnp.all(_reduce(jnp.all, act[1] == actn[1], True))
         done = ((t == 1.0) & same) | (jnp.max(jnp.abs(gn)) <= _rounding_floor(s, qn))
         return qn, phin, gn, actn, i + 1, L, same, done
 
