@@ -178,11 +178,42 @@ def _relative(s: ContactSystem, q):
     return jnp.einsum("bin,n->bi", s.B, q) + s.eb
 
 
+def _rows(s: ContactSystem) -> Float[Array, "r n"]:
+    """Every row of the system ((m + 2b) × n): the unilateral contacts, then every bearing's x row, then its y row."""
+    return jnp.concatenate([s.G, s.B[:, 0, :], s.B[:, 1, :]])
+
+
+def _values(s: ContactSystem, q, rows=None):
+    """The value of every row at q, rows q + offsets (m + 2b): the contacts' penetrations, then the bearings' relative
+    displacements, x then y. The Newton iteration carries them: along a step they move by rows dq."""
+    rows = _rows(s) if rows is None else rows
+    return rows @ q + jnp.concatenate([s.e, s.eb[:, 0], s.eb[:, 1]])
+
+
+def _split(s: ContactSystem, v):
+    """Row values `v` (`_values`) as the contacts' penetrations (m,) and the bearings' displacements (b × 2)."""
+    m, b = s.e.shape[0], s.c.shape[0]
+    return v[:m], jnp.stack([v[m : m + b], v[m + b :]], axis=-1)
+
+
+def _energy(s: ContactSystem, v):
+    """The contacts' and bearings' energy at row values `v` (Φ without the regularisation and the load)."""
+    p, r = _split(s, v)
+    pos = jnp.maximum(p, 0.0)
+    energy, _ = _bearing_local(s, r)
+    return 0.5 * _sum(s.k * pos * pos) + jnp.sum(energy)
+
+
+def _row_forces(s: ContactSystem, v):
+    """The force along every row at row values `v`: ∇Φ = rowsᵀ (row forces) + μ q − f."""
+    p, r = _split(s, v)
+    _, force = _bearing_local(s, r)
+    return jnp.concatenate([s.k * jnp.maximum(p, 0.0), force[:, 0], force[:, 1]])
+
+
 def potential(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, ""]:
     """Φ(q) (module notes)."""
-    p = jnp.maximum(s.G @ q + s.e, 0.0)
-    energy, _ = _bearing_local(s, _relative(s, q))
-    return 0.5 * _sum(s.k * p * p) + jnp.sum(energy) + 0.5 * s.mu * jnp.dot(q, q) - jnp.dot(s.f, q)
+    return _energy(s, _values(s, q)) + 0.5 * s.mu * jnp.dot(q, q) - jnp.dot(s.f, q)
 
 
 def gradient(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, " n"]:
@@ -198,9 +229,8 @@ def hessian(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, "n n"]:
 
 
 def _rows_t(s: ContactSystem) -> Float[Array, "n r"]:
-    """Every row of the system, transposed (n × (m + 2b)): the unilateral contacts, then every bearing's x row, then
-    its y row."""
-    return jnp.concatenate([s.G, s.B[:, 0, :], s.B[:, 1, :]]).T
+    """Every row of the system, transposed (n × (m + 2b)), `_rows`."""
+    return _rows(s).T
 
 
 def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype, rows_t=None) -> Float[Array, "n n"]:
@@ -225,19 +255,25 @@ def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype, rows_t=None) 
 
 
 def _line_search(s: ContactSystem, q, dq):
-    """The step t > 0 that minimises Φ(q + t dq), exactly: φ′(t) is piecewise linear and increasing, with a kink
-    wherever a unilateral contact or a bearing face opens or closes. From its start (see below) the walk takes the
-    root of φ′ on the piece it stands on if that root lies before the next kink, or moves to that kink; each step crosses one kink
-    (a contact that closes usually stops the walk at once). Out of steps: the last kink reached (φ decreases up to
-    it)."""
+    """The step t > 0 that minimises Φ(q + t dq) (`_search`)."""
+    rows = _rows(s)
+    return _search(s, q, dq, _values(s, q, rows), rows @ dq)
+
+
+def _search(s: ContactSystem, q, dq, v, u):
+    """The step t > 0 that minimises Φ(q + t dq), exactly, from the row values at q, `v`, and their change along dq,
+    `u` (`_values`): φ′(t) is piecewise linear and increasing, with a kink wherever a unilateral contact or a bearing
+    face opens or closes. From its start (see below) the walk takes the root of φ′ on the piece it stands on if that
+    root lies before the next kink, or moves to that kink; each step crosses one kink (a contact that closes usually
+    stops the walk at once). Out of steps: the last kink reached (φ decreases up to it)."""
     N = _normals(q.dtype)
     poly = s.c > 0
     kb = jnp.where(poly, s.kb, 0.0)
     ks = jnp.where(poly, 0.0, s.kb)
-    r0, rb = _relative(s, q), jnp.einsum("bin,n->bi", s.B, dq)
+    (p0, r0), (pb, rb) = _split(s, v), _split(s, u)
     # Every row as one piece a + t b with stiffness w: the unilateral contacts, then the faces of every bearing.
-    a = jnp.concatenate([s.G @ q + s.e, jnp.ravel(_along_normals(r0) - s.c[:, None])])
-    b = jnp.concatenate([s.G @ dq, jnp.ravel(_along_normals(rb))])
+    a = jnp.concatenate([p0, jnp.ravel(_along_normals(r0) - s.c[:, None])])
+    b = jnp.concatenate([pb, jnp.ravel(_along_normals(rb))])
     w = jnp.concatenate([s.k, jnp.ravel(jnp.broadcast_to(kb[:, None], (kb.shape[0], N.shape[0])))])
     # The smooth part: regularisation, load and the bearings without clearance (plain springs).
     lin0 = s.mu * jnp.dot(q, dq) - jnp.dot(s.f, dq) + jnp.sum(ks * jnp.sum(r0 * rb, axis=-1))
@@ -274,20 +310,27 @@ def _line_search(s: ContactSystem, q, dq):
     return jax.lax.cond(behind, lambda: walk(zero)[0], lambda: t)
 
 
-def _rounding_floor(s: ContactSystem, q):
+def _rounding_floor(s: ContactSystem, q, abs_rows=None):
     """The rounding level of the force residual at q: eps × the largest magnitude it is computed from (the load, the
-    contact terms k (|G||q| + |e|), the bearing terms)."""
-    aq = jnp.abs(q)
-    unilateral = jnp.maximum(_reduce(jnp.max, s.k * (jnp.abs(s.G) @ aq + jnp.abs(s.e)), 0.0), 0.0)
-    bearing = jnp.max(s.kb * jnp.max(jnp.einsum("bin,n->bi", jnp.abs(s.B), aq) + jnp.abs(s.eb), axis=-1) + s.kb * s.c, initial=0.0)
+    contact terms k (|G||q| + |e|), the bearing terms). `abs_rows`: |`_rows`|, if already built."""
+    abs_rows = jnp.abs(_rows(s)) if abs_rows is None else abs_rows
+    p, r = _split(s, abs_rows @ jnp.abs(q) + jnp.abs(jnp.concatenate([s.e, s.eb[:, 0], s.eb[:, 1]])))
+    unilateral = jnp.maximum(_reduce(jnp.max, s.k * p, 0.0), 0.0)
+    bearing = jnp.max(s.kb * jnp.max(r, axis=-1) + s.kb * s.c, initial=0.0)
     scale = jnp.maximum(jnp.max(jnp.abs(s.f)), jnp.maximum(unilateral, bearing))
     return ROUNDING_FACTOR * jnp.finfo(q.dtype).eps * scale
 
 
 def _active(s: ContactSystem, q):
     """Which unilateral contacts and bearing faces are closed at q."""
-    faces = (_along_normals(_relative(s, q)) - s.c[:, None] > 0.0) & (s.c > 0)[:, None]  # a bearing without clearance has none
-    return s.G @ q + s.e > 0.0, faces
+    return _closed(s, _values(s, q))
+
+
+def _closed(s: ContactSystem, v):
+    """Which unilateral contacts and bearing faces are closed at row values `v` (`_values`)."""
+    p, r = _split(s, v)
+    faces = (_along_normals(r) - s.c[:, None] > 0.0) & (s.c > 0)[:, None]  # a bearing without clearance has none
+    return p > 0.0, faces
 
 
 def _newton(s: ContactSystem, q0):
@@ -299,42 +342,48 @@ def _newton(s: ContactSystem, q0):
     do not on the last one; else factored again)."""
 
     def cond(state):
-        _, _, _, _, i, _, _, done = state
+        i, done = state[5], state[8]
         return (~done) & (i < MAX_STEPS)
 
-    # The rows, transposed, once per solve. Left to `_hessian`, XLA hoists the rows out of the loop untransposed and
-    # its product with them was the slowest operation of an iteration in a profile; this way the 16 units at 360
+    # The rows, once per solve, and transposed. Left to `_hessian`, XLA hoists the rows out of the loop untransposed
+    # and its product with them was the slowest operation of an iteration in a profile; this way the 16 units at 360
     # angles of docs/rv.md take 0.164 s per unit instead of 0.177.
-    rows_t = _rows_t(s)
+    rows = _rows(s)
+    rows_t, abs_rows = rows.T, jnp.abs(rows)
+
+    def energy(q, v):
+        return _energy(s, v) + 0.5 * s.mu * jnp.dot(q, q) - jnp.dot(s.f, q)
 
     def body(state):
-        q, phi, g, act, i, _, _, _ = state
+        q, v, phi, g, act, i, _, _, _ = state
         L = jnp.linalg.cholesky(_hessian(s, act, q.dtype, rows_t))
         dq = -jax.scipy.linalg.cho_solve((L, True), g)
+        u = rows @ dq  # every row's change along the step (the rows are linear in q)
         # The full step where it decreases Φ enough (Armijo): the whole set of closed contacts may change at once.
-        phi_full = potential(s, q + dq)
+        phi_full = energy(q + dq, v + u)
         full = phi_full <= phi + ARMIJO * jnp.dot(g, dq)
 
         def searched():
-            t = _line_search(s, q, dq)
-            return t, potential(s, q + t * dq)
+            t = _search(s, q, dq, v, u)
+            return t, energy(q + t * dq, v + t * u)
 
         t, phin = jax.lax.cond(full, lambda: (jnp.ones((), dtype=q.dtype), phi_full), searched)
-        qn = q + t * dq
-        gn = gradient(s, qn)
-        actn = _active(s, qn)
+        qn, vn = q + t * dq, v + t * u
+        gn = rows_t @ _row_forces(s, vn) + s.mu * qn - s.f
+        actn = _closed(s, vn)
         same = _reduce(jnp.all, act[0] == actn[0], True) & jnp.all(_reduce(jnp.all, act[1] == actn[1], True))
-        done = ((t == 1.0) & same) | (jnp.max(jnp.abs(gn)) <= _rounding_floor(s, qn))
-        return qn, phin, gn, actn, i + 1, L, same, done
+        done = ((t == 1.0) & same) | (jnp.max(jnp.abs(gn)) <= _rounding_floor(s, qn, abs_rows))
+        return qn, vn, phin, gn, actn, i + 1, L, same, done
 
-    # Carried from one iteration to the next: Φ, ∇Φ and the closed contacts at q (the Hessian is theirs), and the
-    # last factor with whether it is the Hessian's at q.
-    g0 = gradient(s, q0)
-    done0 = jnp.max(jnp.abs(g0)) <= _rounding_floor(s, q0)
+    # Carried from one iteration to the next: q and the values of the rows there, Φ, ∇Φ and the closed contacts at q
+    # (the Hessian is theirs), and the last factor with whether it is the Hessian's at q.
+    v0 = _values(s, q0, rows)
+    g0 = rows_t @ _row_forces(s, v0) + s.mu * q0 - s.f
+    done0 = jnp.max(jnp.abs(g0)) <= _rounding_floor(s, q0, abs_rows)
     n = q0.shape[0]
     no_factor = jnp.zeros((n, n), dtype=q0.dtype)
-    state = (q0, potential(s, q0), g0, _active(s, q0), jnp.asarray(0), no_factor, jnp.asarray(False), done0)
-    q, _, g, act, steps, L, fresh, ok = jax.lax.while_loop(cond, body, state)
+    state = (q0, v0, energy(q0, v0), g0, _closed(s, v0), jnp.asarray(0), no_factor, jnp.asarray(False), done0)
+    q, _, _, g, act, steps, L, fresh, ok = jax.lax.while_loop(cond, body, state)
     L = jax.lax.cond(fresh, lambda: L, lambda: jnp.linalg.cholesky(_hessian(s, act, q.dtype, rows_t)))
     return q, ok, steps, g, L
 
