@@ -248,16 +248,9 @@ def test_near_perfect_units_converge_well_inside_the_iteration_limit(drive):
     assert np.max(np.ptp(np.asarray(r.te), axis=1)) < 1e-5  # rad (2″): errors of nm, a 1.5 µm profile clearance
 
 
-@pytest.mark.parametrize("clearance_mm", [0.0, 0.004])
-def test_turning_the_whole_drive_by_a_pin_pitch_gives_the_same_te(drive, clearance_mm):
+def test_turning_the_whole_drive_by_a_pin_pitch_gives_the_same_te(drive):
     """Pins are at fixed angles, so the drive can be turned onto itself by k pin pitches γ: the per-pin errors move k
-    places, housing-fixed phases turn by γ, the sun's by γ − i γ (it turns i γ as the carrier turns γ). With bearing
-    clearances too: each bearing's polygon turns with the part whose load it carries (`rv_system`)."""
-    drive = eqx.tree_at(
-        lambda d: (d.crank_disc_clearance_mm, d.crank_carrier_clearance_mm),
-        drive,
-        (jnp.asarray(clearance_mm), jnp.asarray(0.75 * clearance_mm)),
-    )
+    places, housing-fixed phases turn by γ, the sun's by γ − i γ (it turns i γ as the carrier turns γ)."""
     k = 3
     gamma = 2 * np.pi * k / ZP
     errs = dict(_scaled(1.0))
@@ -273,8 +266,6 @@ def test_turning_the_whole_drive_by_a_pin_pitch_gives_the_same_te(drive, clearan
     a = drive.solve_at(errs, th)
     b = drive.solve_at(turned, th + gamma)
     np.testing.assert_allclose(np.asarray(b.te), np.asarray(a.te), rtol=1e-9, atol=1e-13)
-    if clearance_mm > 0:  # the parts float in their bearings: lost motion of arc seconds
-        assert np.max(np.asarray(a.te[0] - a.te[1])) > 1e-5
 
 
 def test_warm_started_orders_give_the_te_of_each_angle_solved_alone():

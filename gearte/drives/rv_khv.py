@@ -373,8 +373,8 @@ class RVKHV(AbstractGridDrive):
         return (
             f"taken on a grid of {self.points} output angles over one output revolution ({self.points} × 2 equilibrium "
             "solves), not between them; each solve is Newton's method on the contact potential (bearing clearances as "
-            "64-gons turned with their parts, within 1.2e-3 of the clearance; TE within 0.025″ at the median solve, 0.16″ "
-            "at the 99th percentile, of 1,024-gons) until the step lands on the minimum, then the elastic part removed "
+            "64-gons, within 1.2e-3 of the clearance; TE within 0.025″ at the median solve, 0.15″ at the 99th percentile, "
+            "of 1,024-gons) until the step lands on the minimum, then the elastic part removed "
             "exactly for the closed contacts (the rigid limit); result codes per solve"
         )
 

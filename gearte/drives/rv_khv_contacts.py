@@ -148,14 +148,7 @@ def translations(cranks: int, discs: int) -> np.ndarray:
 
 def rv_system(drive: RVKHV, err: dict, theta_out, load_sign) -> ContactSystem:
     """The contacts of the RV reducer at nominal output angle θ_o (rad; input angle i θ_o) under a torque on the
-    carrier of sign `load_sign`. `err`: the checked protocol mapping of the drive's error sources.
-
-    Every bearing's relative displacement is written in a frame turned with the part whose load it carries, the
-    disc's eccentric for a crank–disc bearing and the carrier for the others, so that its clearance polygon
-    (`gearte.drives.rv_khv_equilibrium`) turns with the drive: turned by a pin pitch, the drive is the same drive,
-    polygons included, and a solve started from the previous angle's solution turned with the drive finds its
-    bearings where they were (13.0 Newton iterations per solve at 360 angles against 14.2 with the polygons fixed
-    in the housing)."""
+    carrier of sign `load_sign`. `err`: the checked protocol mapping of the drive's error sources."""
     Nc, D, zp = drive.cranks, drive.discs, drive.z_pins
     zc = zp - 1
     n = dof_count(Nc, D)
@@ -210,7 +203,7 @@ def rv_system(drive: RVKHV, err: dict, theta_out, load_sign) -> ContactSystem:
     k = jnp.concatenate(ks)
 
     # Bearings: crank–disc (each crank in each disc), crank–carrier, carrier main bearing.
-    Bs, ebs, cs, turns = [], [], [], []
+    Bs, ebs, cs = [], [], []
     c_cd = jnp.maximum(drive.crank_disc_clearance_mm + err["crank_disc_clearance"] * UM, 0.0)
     c_cc = jnp.maximum(drive.crank_carrier_clearance_mm + err["crank_carrier_clearance"] * UM, 0.0)
     c_m = jnp.maximum(drive.main_bearing_clearance_mm + err["main_bearing_clearance"] * UM, 0.0)
@@ -230,28 +223,21 @@ def rv_system(drive: RVKHV, err: dict, theta_out, load_sign) -> ContactSystem:
             Bs.append(B)
             ebs.append(eb)
             cs.append(c_cd)
-            turns.append(eta)
     for i in range(Nc):
         B = body_block(2 + 3 * i, jnp.zeros(2)) - body_block(i_car, C[i])
         Bs.append(B)
         ebs.append(-ch_err.magnitude[i] * UM * _dir(ch_err.phase[i] + zeta[i]))
         cs.append(c_cc)
-        turns.append(theta_out)
     Bs.append(body_block(i_car, jnp.zeros(2)))
     ebs.append(jnp.zeros(2))
     cs.append(c_m)
-    turns.append(theta_out)
-    # Each bearing's relative displacement in a frame turned with the part whose load it carries (the eccentric for a
-    # crank-disc bearing, the carrier for the others), so that its clearance polygon turns with the drive.
-    rot = jnp.stack([_dir(-jnp.asarray(t, dtype=float)) for t in turns])  # (cos φ, −sin φ)
-    turn = jnp.stack([jnp.stack([rot[:, 0], -rot[:, 1]], axis=-1), jnp.stack([rot[:, 1], rot[:, 0]], axis=-1)], axis=1)
     f = zeros.at[i_car + 2].set(load_sign * drive.deflection_mm * drive.pin_stiffness)
     return ContactSystem(
         G=G,
         e=e,
         k=k,
-        B=jnp.einsum("bij,bjn->bin", turn, jnp.stack(Bs)),
-        eb=jnp.einsum("bij,bj->bi", turn, jnp.stack(ebs)),
+        B=jnp.stack(Bs),
+        eb=jnp.stack(ebs),
         c=jnp.stack(cs),
         kb=jnp.full((len(Bs),), drive.bearing_stiffness),
         f=f,

@@ -13,7 +13,7 @@ as arcs at a reference length L, so every coordinate is a length):
   outward normal n_f) is a unilateral contact of penetration n_f·r − c and stiffness k. The
   polygon lies outside the circle by at most c (sec(π/M) − 1) (1.2e-3 c for M = 64: 6 nm for a
   5 µm clearance) and makes the whole potential piecewise quadratic. Its faces are fixed in the frame
-  of r: a caller that writes r in a turning frame turns the polygon with it (`rv_system` does).
+  of r (for the RV reducer, the housing).
 
 With a generalised load f (a small torque on the output) the equilibrium is the minimum of the
 convex potential
