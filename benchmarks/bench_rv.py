@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 def numpy_system(s):
     import numpy as np
 
-    return {k: np.asarray(getattr(s, k)) for k in ("G", "e", "k", "B", "eb", "c", "kb", "f", "mu")}
+    return {k: np.asarray(getattr(s, k)) for k in ("G", "e", "k", "B", "eb", "c", "kb", "f", "mu")} | {"faces": s.faces}
 
 
 def scipy_solve(s, q0=None, *, gtol_rel: float = 1e-10) -> tuple:
@@ -50,9 +50,9 @@ def scipy_solve(s, q0=None, *, gtol_rel: float = 1e-10) -> tuple:
     import numpy as np
     from scipy.optimize import minimize
 
-    from gearte.drives.rv_khv_equilibrium import FACE_NORMALS
+    from gearte.drives.rv_khv_equilibrium import face_normals
 
-    N = FACE_NORMALS
+    N = face_normals(s["faces"])
     G, e, k, B, eb, c, kb, f, mu = (s[x] for x in ("G", "e", "k", "B", "eb", "c", "kb", "f", "mu"))
     poly = c > 0
 

@@ -10,6 +10,7 @@ l = a z_c sin φ / S of the cycloid's lines of action; gradients against float64
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import equinox as eqx
@@ -529,3 +530,46 @@ def test_the_newton_iteration_compiles_without_windowed_reductions(drive):
     text = jax.jit(_newton).lower(s, jnp.zeros_like(s.f)).compile().as_text()
     assert "while" in text
     assert "reduce-window" not in text
+
+
+@pytest.mark.parametrize("faces", [8, 64, 128])
+def test_a_loaded_part_rests_on_the_vertex_of_its_clearance_polygon_nearest_the_load(faces):
+    """One free part (x, y) in a bearing of clearance c, pushed in direction ψ: in the rigid limit it rests at the
+    support point of the M-gon tangent to the circle, the vertex nearest ψ, at c / cos(π/M) (`ContactSystem.faces`)."""
+    c, psi = 0.005, 0.3
+    s = ContactSystem(
+        G=jnp.asarray([[1.0, 0.0]]),
+        e=jnp.asarray([-1.0]),
+        k=jnp.asarray([0.0]),  # no unilateral contact
+        B=jnp.eye(2)[None],
+        eb=jnp.zeros((1, 2)),
+        c=jnp.asarray([c]),
+        kb=jnp.ones(1),
+        f=1e-9 * jnp.asarray([math.cos(psi), math.sin(psi)]),
+        mu=jnp.asarray(1e-12),
+        faces=faces,
+    )
+    eq = eqx.filter_jit(solve)(s)
+    pitch = 2 * math.pi / faces
+    vertex = (math.floor(psi / pitch) + 0.5) * pitch
+    want = c / math.cos(math.pi / faces) * np.asarray([math.cos(vertex), math.sin(vertex)])
+    assert bool(eq.result == RESULTS.successful)
+    np.testing.assert_allclose(np.asarray(eq.q_rigid), want, rtol=1e-9, atol=0)
+
+
+def test_the_bearing_polygon_is_an_option_of_the_drive_and_its_study_file(tmp_path):
+    """`RVKHV(bearing_faces=...)` and ``[drive.model] bearing_faces`` reach the contact system; fewer than 8 faces are
+    refused, naming the key."""
+    from gearte.cli.config import load_study
+
+    drive = make(bearing_faces=16)
+    s = jax.jit(lambda e: rv_system(drive, drive.errors(e), 0.37, 1.0))(_scaled(1.0))
+    assert s.faces == 16 and make().bearing_faces == 64
+    with pytest.raises(ValueError, match="bearing_faces"):
+        make(bearing_faces=4)
+    text = (Path(__file__).resolve().parents[1] / "examples" / "rv_robot_joint.toml").read_text()
+    head, sep, tail = text.partition("[drive.model]")
+    assert sep
+    path = tmp_path / "rv.toml"
+    path.write_text(head + sep + tail.replace("\n", "\nbearing_faces = 128\n", 1))
+    assert load_study(path).drive.bearing_faces == 128

@@ -242,6 +242,7 @@ def rv_system(drive: RVKHV, err: dict, theta_out, load_sign) -> ContactSystem:
         kb=jnp.full((len(Bs),), drive.bearing_stiffness),
         f=f,
         mu=jnp.asarray(drive.regularisation * drive.pin_stiffness),
+        faces=drive.bearing_faces,
     )
 
 

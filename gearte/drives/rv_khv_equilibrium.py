@@ -9,8 +9,9 @@ as arcs at a reference length L, so every coordinate is a length):
   e its equivalent error (mm, > 0: interference, < 0: a gap) and force k·max(0, p);
 - a **bearing** with radial clearance c has a relative displacement r = B q + e_b (a plane vector,
   mm). Without clearance (c = 0) it is a plain spring, force k r. With a clearance its dead zone is
-  the regular polygon of `BEARING_FACES` faces tangent to the circle of radius c: each face f (unit
-  outward normal n_f) is a unilateral contact of penetration n_f·r − c and stiffness k. The
+  the regular polygon of M = `ContactSystem.faces` faces (default `BEARING_FACES`, 64) tangent to the
+  circle of radius c: each face f (unit outward normal n_f) is a unilateral contact of penetration
+  n_f·r − c and stiffness k. The
   polygon lies outside the circle by at most c (sec(π/M) − 1) (1.2e-3 c for M = 64: 6 nm for a
   5 µm clearance) and makes the whole potential piecewise quadratic. Its faces are fixed in the frame
   of r (for the RV reducer, the housing).
@@ -61,7 +62,7 @@ from jaxtyping import Array, Float
 from ..core import linalg
 from ..core.solution import RESULTS
 
-#: Faces of the polygon that stands for a bearing's clearance circle.
+#: Faces of the polygon that stands for a bearing's clearance circle, by default (`ContactSystem.faces`).
 BEARING_FACES = 64
 #: Largest number of Newton iterations; a solve that needs more reports `RESULTS.nonlinear_max_steps_reached`. Units
 #: with errors far below their clearances are the slow ones: their contacts close one per iteration, 130-260
@@ -75,11 +76,17 @@ ARMIJO = 1e-4
 #: Largest number of kinks the exact line search crosses along one Newton direction.
 LINE_SEARCH_STEPS = 64
 
-_ANGLES = 2 * math.pi * np.arange(BEARING_FACES) / BEARING_FACES
-#: Unit outward normals of the faces (M × 2).
-FACE_NORMALS = np.stack([np.cos(_ANGLES), np.sin(_ANGLES)], axis=1)
-#: Each face's n nᵀ as (xx, xy, yy) (M × 3): a bearing's stiffness over its closed faces is one product with them.
-_FACE_OUTER = np.stack([FACE_NORMALS[:, 0] ** 2, FACE_NORMALS[:, 0] * FACE_NORMALS[:, 1], FACE_NORMALS[:, 1] ** 2], axis=1)
+
+def face_normals(faces: int = BEARING_FACES) -> np.ndarray:
+    """Unit outward normals of a clearance polygon's faces (M × 2), the first along +x."""
+    angles = 2 * math.pi * np.arange(faces) / faces
+    return np.stack([np.cos(angles), np.sin(angles)], axis=1)
+
+
+def _face_outer(faces: int) -> np.ndarray:
+    """Each face's n nᵀ as (xx, xy, yy) (M × 3): a bearing's stiffness over its closed faces is one product with them."""
+    n = face_normals(faces)
+    return np.stack([n[:, 0] ** 2, n[:, 0] * n[:, 1], n[:, 1] ** 2], axis=1)
 
 
 #: XLA's CPU compiler rewrites a reduction over an axis longer than this into a windowed reduction (a pairwise-like
@@ -121,6 +128,7 @@ class ContactSystem(eqx.Module):
       stiffness (b,).
     - `f`: the generalised load (n,), in units of stiffness × mm.
     - `mu`: the regularisation of floating parts (units of stiffness).
+    - `faces`: faces of every bearing's clearance polygon (static; default `BEARING_FACES`).
     """
 
     G: Float[Array, "m n"]
@@ -132,6 +140,7 @@ class ContactSystem(eqx.Module):
     kb: Float[Array, " b"]
     f: Float[Array, " n"]
     mu: Float[Array, ""]
+    faces: int = eqx.field(static=True, default=BEARING_FACES)
 
 
 class Equilibrium(eqx.Module):
@@ -151,22 +160,22 @@ class Equilibrium(eqx.Module):
     steps: Array
 
 
-def _normals(dtype):
-    return jnp.asarray(FACE_NORMALS, dtype=dtype)
+def _normals(dtype, faces: int):
+    return jnp.asarray(face_normals(faces), dtype=dtype)
 
 
-def _along_normals(r):
+def _along_normals(r, faces: int):
     """n_f · r for every face f of every bearing (… × M) from plane vectors r (… × 2): written as a product and a
     sum rather than a matrix product with the normals, so that XLA fuses it with what uses it (on the CPU a separate
     small matrix product costs more to launch than its arithmetic)."""
-    N = _normals(r.dtype)
+    N = _normals(r.dtype, faces)
     return r[..., 0:1] * N[:, 0] + r[..., 1:2] * N[:, 1]
 
 
 def _bearing_local(s: ContactSystem, r):
     """Energy (b,) and force vector (b × 2) of every bearing at relative displacement r (its stiffness: `_hessian`)."""
-    N = _normals(r.dtype)
-    P = _along_normals(r) - s.c[:, None]  # face penetrations (b × M)
+    N = _normals(r.dtype, s.faces)
+    P = _along_normals(r, s.faces) - s.c[:, None]  # face penetrations (b × M)
     pos = jnp.maximum(P, 0.0)
     poly = s.c > 0
     energy = 0.5 * s.kb * jnp.where(poly, _sum(pos * pos), jnp.sum(r * r, axis=-1))
@@ -237,11 +246,11 @@ def _rows_t(s: ContactSystem) -> Float[Array, "n r"]:
 def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype, rows_t=None) -> Float[Array, "n n"]:
     """The Hessian for the closed contacts and bearing faces `active` (`_active`): every row of the contacts and the
     bearings with its stiffness applied, in one product, ``rowsᵀ (K rows)`` (a bearing's 2 × 2 stiffness written out;
-    ``Σ_f n_f n_fᵀ`` over its closed faces summed with `_FACE_OUTER`). `rows_t`: `_rows_t`, if already built."""
+    ``Σ_f n_f n_fᵀ`` over its closed faces summed with `_face_outer`). `rows_t`: `_rows_t`, if already built."""
     closed, faces = active
     n = s.G.shape[1]
     poly = s.c > 0
-    outer = jnp.asarray(_FACE_OUTER, dtype=dtype)
+    outer = jnp.asarray(_face_outer(s.faces), dtype=dtype)
     closed_faces = faces.astype(dtype)
     kxx = s.kb * jnp.where(poly, _sum(closed_faces * outer[:, 0]), 1.0)
     kxy = s.kb * jnp.where(poly, _sum(closed_faces * outer[:, 1]), 0.0)
@@ -267,14 +276,14 @@ def _search(s: ContactSystem, q, dq, v, u):
     face opens or closes. From its start (see below) the walk takes the root of φ′ on the piece it stands on if that
     root lies before the next kink, or moves to that kink; each step crosses one kink (a contact that closes usually
     stops the walk at once). Out of steps: the last kink reached (φ decreases up to it)."""
-    N = _normals(q.dtype)
+    N = _normals(q.dtype, s.faces)
     poly = s.c > 0
     kb = jnp.where(poly, s.kb, 0.0)
     ks = jnp.where(poly, 0.0, s.kb)
     (p0, r0), (pb, rb) = _split(s, v), _split(s, u)
     # Every row as one piece a + t b with stiffness w: the unilateral contacts, then the faces of every bearing.
-    a = jnp.concatenate([p0, jnp.ravel(_along_normals(r0) - s.c[:, None])])
-    b = jnp.concatenate([pb, jnp.ravel(_along_normals(rb))])
+    a = jnp.concatenate([p0, jnp.ravel(_along_normals(r0, s.faces) - s.c[:, None])])
+    b = jnp.concatenate([pb, jnp.ravel(_along_normals(rb, s.faces))])
     w = jnp.concatenate([s.k, jnp.ravel(jnp.broadcast_to(kb[:, None], (kb.shape[0], N.shape[0])))])
     # The smooth part: regularisation, load and the bearings without clearance (plain springs).
     lin0 = s.mu * jnp.dot(q, dq) - jnp.dot(s.f, dq) + jnp.sum(ks * jnp.sum(r0 * rb, axis=-1))
@@ -330,7 +339,7 @@ def _active(s: ContactSystem, q):
 def _closed(s: ContactSystem, v):
     """Which unilateral contacts and bearing faces are closed at row values `v` (`_values`)."""
     p, r = _split(s, v)
-    faces = (_along_normals(r) - s.c[:, None] > 0.0) & (s.c > 0)[:, None]  # a bearing without clearance has none
+    faces = (_along_normals(r, s.faces) - s.c[:, None] > 0.0) & (s.c > 0)[:, None]  # a bearing without clearance has none
     return p > 0.0, faces
 
 
@@ -451,4 +460,4 @@ def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium
     return Equilibrium(q, q_rigid, force, bforce, result, steps)
 
 
-__all__ = ("BEARING_FACES", "ContactSystem", "Equilibrium", "gradient", "hessian", "potential", "solve")
+__all__ = ("BEARING_FACES", "ContactSystem", "Equilibrium", "face_normals", "gradient", "hessian", "potential", "solve")
