@@ -383,8 +383,7 @@ class RVKHV(AbstractGridDrive):
             f"{self.bearing_faces}-gons, within {1 / math.cos(math.pi / self.bearing_faces) - 1:.1e} of the clearance; on "
             "the tolerance example the 64-gon's TE is within 0.025″ of 1,024-gons at the median solve and 0.15″ at the "
             "99th percentile, 128 faces' within 0.006″ and 0.10″) until the step lands on the minimum, then the elastic "
-            "part removed "
-            "exactly for the closed contacts (the rigid limit); result codes per solve"
+            "part removed exactly for the closed contacts (the rigid limit); result codes per solve"
         )
 
     def solved(self, response: RVResponse) -> Array:

@@ -184,10 +184,6 @@ def _bearing_local(s: ContactSystem, r):
     return energy, force
 
 
-def _relative(s: ContactSystem, q):
-    return jnp.einsum("bin,n->bi", s.B, q) + s.eb
-
-
 def _rows(s: ContactSystem) -> Float[Array, "r n"]:
     """Every row of the system ((m + 2b) × n): the unilateral contacts, then every bearing's x row, then its y row."""
     return jnp.concatenate([s.G, s.B[:, 0, :], s.B[:, 1, :]])
@@ -197,7 +193,12 @@ def _values(s: ContactSystem, q, rows=None):
     """The value of every row at q, rows q + offsets (m + 2b): the contacts' penetrations, then the bearings' relative
     displacements, x then y. The Newton iteration carries them: along a step they move by rows dq."""
     rows = _rows(s) if rows is None else rows
-    return rows @ q + jnp.concatenate([s.e, s.eb[:, 0], s.eb[:, 1]])
+    return rows @ q + _offsets(s)
+
+
+def _offsets(s: ContactSystem):
+    """Every row's offset (m + 2b): the contacts' equivalent errors, then the bearings' x and y errors."""
+    return jnp.concatenate([s.e, s.eb[:, 0], s.eb[:, 1]])
 
 
 def _split(s: ContactSystem, v):
@@ -215,10 +216,15 @@ def _energy(s: ContactSystem, v):
 
 
 def _row_forces(s: ContactSystem, v):
-    """The force along every row at row values `v`: ∇Φ = rowsᵀ (row forces) + μ q − f."""
+    """The force along every row at row values `v` (`_gradient`)."""
     p, r = _split(s, v)
     _, force = _bearing_local(s, r)
     return jnp.concatenate([s.k * jnp.maximum(p, 0.0), force[:, 0], force[:, 1]])
+
+
+def _gradient(s: ContactSystem, q, v, rows_t):
+    """∇Φ = rowsᵀ (row forces) + μ q − f at q, its row values `v` (`_values`) and the rows transposed `rows_t`."""
+    return rows_t @ _row_forces(s, v) + s.mu * q - s.f
 
 
 def potential(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, ""]:
@@ -228,9 +234,8 @@ def potential(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, ""]:
 
 def gradient(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, " n"]:
     """∇Φ(q): generalised-force residual."""
-    p = jnp.maximum(s.G @ q + s.e, 0.0)
-    _, force = _bearing_local(s, _relative(s, q))
-    return s.G.T @ (s.k * p) + jnp.einsum("bin,bi->n", s.B, force) + s.mu * q - s.f
+    rows = _rows(s)
+    return _gradient(s, q, _values(s, q, rows), rows.T)
 
 
 def hessian(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, "n n"]:
@@ -238,15 +243,10 @@ def hessian(s: ContactSystem, q: Float[Array, " n"]) -> Float[Array, "n n"]:
     return _hessian(s, _active(s, q), q.dtype)
 
 
-def _rows_t(s: ContactSystem) -> Float[Array, "n r"]:
-    """Every row of the system, transposed (n × (m + 2b)), `_rows`."""
-    return _rows(s).T
-
-
 def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype, rows_t=None) -> Float[Array, "n n"]:
     """The Hessian for the closed contacts and bearing faces `active` (`_active`): every row of the contacts and the
     bearings with its stiffness applied, in one product, ``rowsᵀ (K rows)`` (a bearing's 2 × 2 stiffness written out;
-    ``Σ_f n_f n_fᵀ`` over its closed faces summed with `_face_outer`). `rows_t`: `_rows_t`, if already built."""
+    ``Σ_f n_f n_fᵀ`` over its closed faces summed with `_face_outer`). `rows_t`: `_rows` transposed, if already built."""
     closed, faces = active
     n = s.G.shape[1]
     poly = s.c > 0
@@ -257,7 +257,7 @@ def _hessian(s: ContactSystem, active: tuple[Array, Array], dtype, rows_t=None) 
     kyy = s.kb * jnp.where(poly, _sum(closed_faces * outer[:, 2]), 1.0)
     bx, by = s.B[:, 0, :], s.B[:, 1, :]
     if rows_t is None:
-        rows_t = _rows_t(s)
+        rows_t = _rows(s).T
     stiff = jnp.concatenate(
         [(s.k * closed.astype(dtype))[:, None] * s.G, kxx[:, None] * bx + kxy[:, None] * by, kxy[:, None] * bx + kyy[:, None] * by]
     )
@@ -324,7 +324,7 @@ def _rounding_floor(s: ContactSystem, q, abs_rows=None):
     """The rounding level of the force residual at q: eps × the largest magnitude it is computed from (the load, the
     contact terms k (|G||q| + |e|), the bearing terms). `abs_rows`: |`_rows`|, if already built."""
     abs_rows = jnp.abs(_rows(s)) if abs_rows is None else abs_rows
-    p, r = _split(s, abs_rows @ jnp.abs(q) + jnp.abs(jnp.concatenate([s.e, s.eb[:, 0], s.eb[:, 1]])))
+    p, r = _split(s, abs_rows @ jnp.abs(q) + jnp.abs(_offsets(s)))
     unilateral = jnp.maximum(_reduce(jnp.max, s.k * p, 0.0), 0.0)
     bearing = jnp.max(s.kb * jnp.max(r, axis=-1) + s.kb * s.c, initial=0.0)
     scale = jnp.maximum(jnp.max(jnp.abs(s.f)), jnp.maximum(unilateral, bearing))
@@ -379,7 +379,7 @@ def _newton(s: ContactSystem, q0):
 
         t, phin = jax.lax.cond(full, lambda: (jnp.ones((), dtype=q.dtype), phi_full), searched)
         qn, vn = q + t * dq, v + t * u
-        gn = rows_t @ _row_forces(s, vn) + s.mu * qn - s.f
+        gn = _gradient(s, qn, vn, rows_t)
         actn = _closed(s, vn)
         same = _reduce(jnp.all, act[0] == actn[0], True) & jnp.all(_reduce(jnp.all, act[1] == actn[1], True))
         done = ((t == 1.0) & same) | (jnp.max(jnp.abs(gn)) <= _rounding_floor(s, qn, abs_rows))
@@ -388,7 +388,7 @@ def _newton(s: ContactSystem, q0):
     # Carried from one iteration to the next: q and the values of the rows there, Φ, ∇Φ and the closed contacts at q
     # (the Hessian is theirs), and the last factor with whether it is the Hessian's at q.
     v0 = _values(s, q0, rows)
-    g0 = rows_t @ _row_forces(s, v0) + s.mu * q0 - s.f
+    g0 = _gradient(s, q0, v0, rows_t)
     done0 = jnp.max(jnp.abs(g0)) <= _rounding_floor(s, q0, abs_rows)
     n = q0.shape[0]
     no_factor = jnp.zeros((n, n), dtype=q0.dtype)
@@ -452,8 +452,9 @@ def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium
     q_star, q, q_rigid, low, ok, steps = _settled_each(jax.tree.map(jax.lax.stop_gradient, s), start)
     # One Newton step with the Hessian held: the value stays, the derivative is the implicit one.
     q, q_rigid = _held(s, q_star, low, start, q, q_rigid)
-    force = s.k * jnp.maximum(s.G @ q + s.e, 0.0)
-    _, bf = _bearing_local(s, _relative(s, q))
+    p, r = _split(s, _values(s, q))
+    force = s.k * jnp.maximum(p, 0.0)
+    _, bf = _bearing_local(s, r)
     b2 = jnp.sum(bf * bf, axis=-1)
     bforce = jnp.where(b2 > 0, jnp.sqrt(jnp.where(b2 > 0, b2, 1.0)), 0.0)
     result = RESULTS.where(ok, RESULTS.successful, RESULTS.nonlinear_max_steps_reached)  # pyright: ignore[reportArgumentType]
