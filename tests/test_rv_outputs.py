@@ -20,6 +20,7 @@ import pytest
 from gearte.core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD
 from gearte.drives.protocol import AbstractStudyContext, Eccentricity
 from gearte.drives.rv_khv import RVKHV, RVLostMotion, RVPeakToPeak
+from gearte.drives.rv_khv_contacts import DEFLECTION_MM
 from gearte.drives.rv_khv_outputs import (
     LOADED_FRACTION,
     alias_order,
@@ -259,7 +260,7 @@ def test_study_outputs_draw_every_figure_the_report_shows(drive, metric, tmp_pat
     assert any(label.startswith("lost motion, max") for label in labels) == (metric.name != "lost_motion")
     assert set(out.arrays) >= {"lost_motion_max_arcmin", "te_p2p_forward_arcsec", "solved"}
     assert out.files["reference_unit.npz"]["force_forward"].shape == (POINTS, 2 * ZP + 6)
-    assert resolution(drive) == pytest.approx(10 * 1e-9 / R)  # the default deflection_mm
+    assert resolution(drive) == pytest.approx(10 * DEFLECTION_MM / R, rel=1e-12, abs=0)  # the default deflection_mm
 
 
 def test_no_jax_arrays_leak_into_the_summary(undersize):

@@ -61,7 +61,7 @@ from ..core.validate import as_float, as_int
 from .cycloid_pin import CycloidPin
 from .cycloid_pin_geometry import CycloidModification
 from .protocol import AbstractGridDrive, AbstractStudyContext, Eccentricity, SourceSpec, StudyOutputs, Trace
-from .rv_khv_contacts import dof_count, output_index, rv_system, translations
+from .rv_khv_contacts import DEFLECTION_MM, REGULARISATION_PER_MM, dof_count, output_index, rv_system, translations
 from .rv_khv_equilibrium import BEARING_FACES, solve
 
 if TYPE_CHECKING:
@@ -188,12 +188,14 @@ class RVKHV(AbstractGridDrive):
       error sources of the same names are deviations from these.
     - `points`: output angles of the grid over one output revolution (default 360).
     - `trace_points`: output angles of the report's TE curve (default 2 × `points`).
-    - `deflection_mm`: the elastic deflection scale of the small load (default 1e-9 mm). The rigid-limit results
+    - `deflection_mm`: the elastic deflection scale of the small load (default 1e-10 mm). The rigid-limit results
       do not depend on it inside a window: it must be small enough that the load does not move the weak modes of
-      preloaded parts (about 1e-5 of the pin stiffness) across a change of contact state, and large against the
-      regularisation's force μ |q − q₀| (docs/rv.md, "Size of the small load").
+      preloaded parts (about 1e-5 of the pin stiffness) across a change of contact state, and large enough for the
+      Newton iteration to resolve it against the preload's forces (docs/rv.md, "Size of the small load").
     - `pin_stiffness`, `mesh_stiffness`, `bearing_stiffness`: relative stiffnesses (default 1).
-    - `regularisation`: μ / k_pin for floating parts (default 1e-12).
+    - `regularisation`: μ / k_pin for floating parts (default `REGULARISATION_PER_MM` × `deflection_mm`: 1e-13 at the
+      default load). Tied to the load, its force μ |q − q₀| stays the same small fraction of the load whatever the
+      load's size.
     - `bearing_faces`: faces of the polygon that stands for every bearing's clearance circle (default 64; at
       least 8). On the tolerance example the 64-gon's TE is within 0.025″ of 1,024 faces at the median solve and
       0.15″ at the 99th percentile; 128 faces give 0.006″ and 0.10″ for half again as many Newton iterations
@@ -244,11 +246,11 @@ class RVKHV(AbstractGridDrive):
         main_bearing_clearance_mm: float = 0.0,
         points: int = 360,
         trace_points: int | None = None,
-        deflection_mm: float = 1e-9,
+        deflection_mm: float = DEFLECTION_MM,
         pin_stiffness: float = 1.0,
         mesh_stiffness: float = 1.0,
         bearing_stiffness: float = 1.0,
-        regularisation: float = 1e-12,
+        regularisation: float | None = None,
         bearing_faces: int = BEARING_FACES,
     ):
         self.stage = CycloidPin(
@@ -286,6 +288,8 @@ class RVKHV(AbstractGridDrive):
         self.deflection_mm = jnp.asarray(as_float("deflection_mm", deflection_mm, positive=True), dtype=float)
         for name, v in (("pin_stiffness", pin_stiffness), ("mesh_stiffness", mesh_stiffness), ("bearing_stiffness", bearing_stiffness)):
             setattr(self, name, jnp.asarray(as_float(name, v, positive=True), dtype=float))
+        if regularisation is None:
+            regularisation = REGULARISATION_PER_MM * float(self.deflection_mm)
         self.regularisation = jnp.asarray(as_float("regularisation", regularisation, positive=True), dtype=float)
         self.bearing_faces = as_int("bearing_faces", bearing_faces, minimum=8)
 

@@ -47,6 +47,15 @@ if TYPE_CHECKING:
     from .cycloid_pin import CycloidPin
     from .rv_khv import RVKHV
 
+
+#: The small load's default elastic deflection scale (mm): the middle of the window where the rigid limit does not depend
+#: on it (docs/rv.md, "Size of the small load": on 400 units of the tolerance example, no lost motion below −0.01″ and
+#: no failed solve at 1e-10 mm; at 1e-9 mm units whose weak modes the load moves across a change of contact state).
+DEFLECTION_MM = 1e-10
+#: The default regularisation μ / k_pin per mm of `deflection_mm`: its force μ |q − q₀| is then 1e-3 × |q − q₀| / mm times
+#: the load's, whatever the load.
+REGULARISATION_PER_MM = 1e-3
+
 UM = MM_PER_UM
 #: Pins with a lever arm shorter than this fraction of the disc's longest take their normal clearance as the gap.
 SHORT_LEVER = 0.1
@@ -252,6 +261,8 @@ def output_index(drive: RVKHV) -> int:
 
 
 __all__ = (
+    "DEFLECTION_MM",
+    "REGULARISATION_PER_MM",
     "SHORT_LEVER",
     "cycloid_errors",
     "dof_count",

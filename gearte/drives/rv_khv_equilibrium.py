@@ -25,7 +25,8 @@ convex potential
 unique. `solve` takes it proximal to the starting point, ½ μ |q − q₀|², so a part left floating
 inside its clearances, held by no contact, stays where the start put it (the neighbouring solution
 along the grid) instead of being pulled back to nominal across every contact in its way; μ moves
-nothing that a contact holds (it adds μ|q − q₀| ≈ 1e-15 of the stiffness × mm to the forces).
+nothing that a contact holds (for the RV reducer, μ = 1e-3 k × deflection_mm / mm and |q − q₀| of µm: μ|q − q₀| is
+about 1e-6 of the small load).
 `solve` minimises Φ by Newton's method with an exact line search: φ′(t) along a Newton direction is
 piecewise linear and increasing, so the search walks from kink to kink (a contact or a bearing face
 that opens or closes) to the piece that holds its root. As Φ is piecewise quadratic, the iteration ends

@@ -6,7 +6,7 @@
                     main_bearing_clearance_um (nominal values, default 0)
     [drive.modification]  shift_mm, equidistant_mm, rotation_arcsec (the discs' profile; default none)
     [drive.grid]    points (output angles over one output revolution, 360), trace_points (2 × points)
-    [drive.model]   deflection_mm (1e-9), pin_stiffness, mesh_stiffness, bearing_stiffness (1), bearing_faces (64)
+    [drive.model]   deflection_mm (1e-10; the regularisation follows it), pin_stiffness, mesh_stiffness, bearing_stiffness (1), bearing_faces (64)
 
 The Monte Carlo laws of the errors are the study file's ``[errors.NAME]`` tables, one per error
 source of `gearte.drives.rv_khv.SOURCES` (see docs/study-files.md).
@@ -20,6 +20,7 @@ from typing import Any
 from ..core.schema import Table
 from ..core.units import ARCSEC_PER_RAD
 from .cycloid_pin_geometry import CycloidModification
+from .rv_khv_contacts import DEFLECTION_MM
 
 
 def drive_arguments(t: Table) -> dict[str, Any]:
@@ -52,7 +53,7 @@ def drive_arguments(t: Table) -> dict[str, Any]:
         g.finish()
     if t.has("model"):
         m = t.table("model")
-        kw["deflection_mm"] = m.number("deflection_mm", 1e-9, positive=True)
+        kw["deflection_mm"] = m.number("deflection_mm", DEFLECTION_MM, positive=True)
         for key in ("pin_stiffness", "mesh_stiffness", "bearing_stiffness"):
             kw[key] = m.number(key, 1.0, positive=True)
         if m.has("bearing_faces"):
