@@ -100,8 +100,8 @@ def test_statistics_against_numpy():
     for p in ("1", "5", "50", "95", "99", "99.73"):
         np.testing.assert_allclose(s.percentiles[p], np.percentile(x, float(p)), rtol=1e-14)
     assert set(s.to_dict()) == {"unit", "n", "min", "max", "mean", "std", "percentiles"}
-    with pytest.raises(ValueError, match="non-finite"):
-        gearte.statistics([1.0, float("nan")])
+    with pytest.raises(ValueError, match=r"2 non-finite values \(the first is nan at sample 1\)"):
+        gearte.statistics([1.0, float("nan"), 2.0, float("inf")])
 
 
 def test_statistics_of_values_whose_squares_overflow_stay_finite():

@@ -356,8 +356,12 @@ def statistics(values, *, unit: str = "rad") -> Statistics:
     v = np.asarray(values, dtype=np.float64).ravel()
     if v.size == 0:
         raise ValueError("statistics: no values")
-    if not np.all(np.isfinite(v)):
-        raise ValueError(f"statistics: {np.count_nonzero(~np.isfinite(v))} non-finite values")
+    bad = np.flatnonzero(~np.isfinite(v))
+    if bad.size:
+        raise ValueError(
+            f"statistics: {bad.size} non-finite values (the first is {v[bad[0]]} at sample {int(bad[0])}); a sample whose "
+            "metric cannot be computed cannot be summarised"
+        )
     pct = np.percentile(v, PERCENTILES)
     with np.errstate(over="ignore", invalid="ignore"):
         std = float(v.std(ddof=1)) if v.size > 1 else 0.0
