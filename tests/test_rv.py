@@ -617,3 +617,15 @@ def test_the_default_small_load_keeps_a_preloaded_units_lost_motion_positive():
     assert lost["heavy"][0] * arcmin < -0.05  # the case this test is about: if it passes, choose another unit
     assert lost["default"][0] >= -resolution(drive)
     assert lost["default"][1] == pytest.approx(lost["heavy"][1], rel=1e-4)
+
+
+def test_the_residual_is_taken_from_q_itself_so_no_solve_stalls_above_its_rounding_floor():
+    """Unit 4055 of the tolerance example (seed 121): with the rows' values carried along the Newton steps (v + t u)
+    instead of computed from q, their rounding drift held one solve's residual at 3× its rounding floor for all 1,000
+    iterations (a failed solve). Computed from q, every solve of the unit ends, the longest in well under 200."""
+    from gearte.cli.config import load_study
+
+    study = load_study(Path(__file__).resolve().parents[1] / "examples" / "rv_robot_joint_tolerances.toml")
+    r = study.drive.response(study.errors.sample(jax.random.fold_in(jax.random.key(121), 4055)))
+    assert bool(study.drive.solved(r))
+    assert int(np.max(np.asarray(r.steps))) < 200
