@@ -200,3 +200,17 @@ def test_every_key_a_reader_asks_for_is_documented_and_every_documented_key_is_r
 def test_every_registered_drive_has_a_section():
     sections = {t for (t, _) in documented() if t is not None}
     assert set(DRIVES) <= sections, sorted(set(DRIVES) - sections)
+
+
+def test_reference_table_names_every_angle_source_with_its_unit():
+    """[drive.reference] (cycloid-pin) takes its keys from the error sources, each with the unit suffix of
+    `unit_of`: the page names every angle source, whose suffix (arcsec) is not the lengths' um."""
+    from gearte.drives.cycloid_pin_geometry import ANGLE_FIELDS
+    from gearte.drives.cycloid_pin_table import unit_of
+
+    text = DOC.read_text(encoding="utf-8")
+    section = text.split("### `[drive.reference]`", 1)[1].split("\n### ", 1)[0]
+    assert {unit_of(f) for f in ANGLE_FIELDS} == {"arcsec"}
+    assert "`NAME_arcsec`" in section and "`NAME_um`" in section and "`NAME_deg`" in section
+    missing = [f for f in ANGLE_FIELDS if f"`{f}`" not in section]
+    assert not missing, f"docs/study-files.md, [drive.reference]: angle sources not named: {missing}"

@@ -163,8 +163,8 @@ def _parser() -> argparse.ArgumentParser:
         "--compile-cache",
         action=argparse.BooleanOptionalAction,
         default=True,
-        help="keep compiled programs on disk for the next run (default: on; folder: $GEARTE_CACHE_DIR, else ~/.cache/gearte/jax; "
-        "GEARTE_COMPILATION_CACHE=0 also turns it off)",
+        help="keep compiled programs on disk for the next run (default: on; folder: $GEARTE_CACHE_DIR, else "
+        "$XDG_CACHE_HOME/gearte/jax, else ~/.cache/gearte/jax; GEARTE_COMPILATION_CACHE=0 also turns it off)",
     )
     r.add_argument(
         "--keep-samples",
