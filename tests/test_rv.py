@@ -267,6 +267,57 @@ def test_turning_the_whole_drive_by_a_pin_pitch_gives_the_same_te(drive):
     a = drive.solve_at(errs, th)
     b = drive.solve_at(turned, th + gamma)
     np.testing.assert_allclose(np.asarray(b.te), np.asarray(a.te), rtol=1e-9, atol=1e-13)
+    # Not vacuous: the pins' errors matter, and only turned with the drive do they give its TE again (a drive that
+    # ignored them, or took pin j's error at another pin, would pass the check above without these).
+    for wrong in (
+        dict(turned, pin_tangential=errs["pin_tangential"]),
+        dict(turned, pin_circle_eccentricity=errs["pin_circle_eccentricity"]),
+    ):
+        c = drive.solve_at(wrong, th + gamma)
+        assert np.max(np.abs(np.asarray(c.te) - np.asarray(a.te))) > 1e-7  # rad (0.02″), 1e6 × the tolerance above
+
+
+def test_each_discs_profile_errors_enter_its_own_pin_contacts_and_the_pins_errors_both():
+    """The contact system's first z_p unilateral rows are disc 1's pins, the next z_p disc 2's. A disc's profile
+    errors (dressing, infeed, indexing, set-up, mandrel) change the equivalent errors of its own pins only; the pins'
+    errors change both discs'; and the discs' eccentrics being 180° apart, swapping their profile errors moves the
+    TE."""
+    zero = {
+        k: (Eccentricity(0 * np.asarray(v.magnitude), v.phase) if isinstance(v, Eccentricity) else 0 * jnp.asarray(v))
+        for k, v in _scaled(1.0).items()
+    }
+    zc = ZP - 1
+    rng = np.random.default_rng(3)
+    disc2 = dict(
+        zero,
+        disc_dressing_x=jnp.asarray([0.0, 2.0]),
+        disc_infeed=jnp.asarray(np.r_[np.zeros(zc), rng.uniform(-2, 2, zc)]),
+        disc_indexing=jnp.asarray(np.r_[np.zeros(zc), rng.uniform(-5e-5, 5e-5, zc)]),  # rad (±10″)
+        disc_setup=Eccentricity(jnp.asarray([0.0, 3.0]), jnp.asarray([0.0, 0.7])),
+    )
+    pins = dict(zero, pin_tangential=jnp.asarray(rng.uniform(-3, 3, ZP)), pin_radial=jnp.asarray(rng.uniform(-3, 3, ZP)))
+    theta = 0.37
+
+    def offsets(errs):
+        s = rv_system(drive_, drive_.errors(errs), theta, 1.0)
+        e, k = np.asarray(s.e), np.asarray(s.k)
+        return [np.where(k[i * ZP : (i + 1) * ZP] > 0, e[i * ZP : (i + 1) * ZP], 0.0) for i in (0, 1)]
+
+    drive_ = make()
+    e0, e2, ep = offsets(zero), offsets(disc2), offsets(pins)
+    np.testing.assert_array_equal(e2[0], e0[0])  # disc 1 untouched by disc 2's profile
+    assert np.max(np.abs(e2[1] - e0[1])) > 1e-4  # mm: disc 2's pins see µm
+    assert min(np.max(np.abs(ep[i] - e0[i])) for i in (0, 1)) > 1e-4  # the pins' errors reach both discs
+    swapped = {
+        k: (Eccentricity(v.magnitude[::-1], v.phase[::-1]) if isinstance(v, Eccentricity) else v[::-1])
+        for k, v in disc2.items()
+        if k.startswith("disc_")
+    }
+    swapped["disc_infeed"] = jnp.roll(disc2["disc_infeed"], zc)
+    swapped["disc_indexing"] = jnp.roll(disc2["disc_indexing"], zc)
+    a, b = drive_.response(disc2), drive_.response(dict(disc2, **swapped))
+    np.testing.assert_array_equal(offsets(dict(disc2, **swapped))[1], e0[1])  # now disc 2 is the perfect one
+    assert np.max(np.abs(np.asarray(a.te) - np.asarray(b.te))) > 1e-6  # rad
 
 
 def test_warm_started_orders_give_the_te_of_each_angle_solved_alone():
