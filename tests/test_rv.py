@@ -78,7 +78,11 @@ PITCH_THETAS = np.arange(12) * (2 * np.pi / ZP / 12)
 
 
 def test_one_crank_one_disc_reproduces_the_cycloid_model():
-    """Hidaka's illustration (one disc on one central crank, rigid) against the cycloid-pin geometric model."""
+    """Hidaka's illustration (one disc on one central crank, rigid) against the cycloid-pin geometric model: the
+    equilibrium of the contact system (its equivalent errors −l Δθ taken from the cycloid module's rotations to
+    contact) against the geometric model's extreme rotation over the pins. This checks the contact system and its
+    solve; the rotations to contact themselves are checked against an independent pin-by-pin root search (SciPy's
+    brentq on the flank written out in NumPy) in tests/test_cycloid.py."""
     rng = np.random.default_rng(3)
     err = CycloidErrors(
         pin_radius=-30.0,
