@@ -64,6 +64,12 @@ def _all_examples_by_type() -> dict[str, list[Path]]:
 ALL_EXAMPLES = _all_examples_by_type()
 
 
+#: Agreement of a Monte Carlo mean's gradient with its central difference, where a drive's is not 1e-6 (see the test).
+FD_REL: dict[str, float] = {"cycloid_pin": 1e-5}  # its contact solves: 1.7e-6 measured
+#: Drives whose trace is the TE under load: without errors, the static deflection (a constant), not zero.
+LOADED_TE = {"helical_planetary"}
+
+
 @pytest.fixture(scope="module", params=sorted(DRIVES) + ["toy"])
 def case(request):
     """(study, name) for every registered drive's example, and for the toy drive of tests/toy_drive.py."""
@@ -110,8 +116,12 @@ def test_zero_errors_give_zero_te(case):
             assert float(m(drive, drive.response(drive.zero_errors()))) == pytest.approx(0.0, abs=1e-15)
         return
     designs = [load_study(p).drive for p in ALL_EXAMPLES.get(name, [])] or [drive]
-    spans = [float(np.ptp(d.trace(d.zero_errors()).te)) for d in designs]
+    traces = [np.asarray(d.trace(d.zero_errors()).te) for d in designs]
+    spans = [float(np.ptp(te)) for te in traces]
     assert min(spans) <= 1e-9, spans  # rad
+    if name not in LOADED_TE:
+        sizes = [float(np.max(np.abs(te))) for te in traces]
+        assert min(sizes) <= 1e-9, sizes  # rad: zero, not only flat, in the unmodified design
 
 
 def test_vmap_equals_a_loop(case):
@@ -132,7 +142,7 @@ def test_results_do_not_depend_on_the_chunk_size(case):
     np.testing.assert_array_equal(a, b)
 
 
-def test_gradients_of_a_monte_carlo_mean_are_finite(case):
+def test_gradients_of_a_monte_carlo_mean_are_finite_and_match_central_differences(case):
     study, name = case
     params, static = eqx.partition(study.errors, eqx.is_inexact_array)
     keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.key(11), i))(jnp.arange(2))
@@ -150,16 +160,16 @@ def test_gradients_of_a_monte_carlo_mean_are_finite(case):
     flat, unflatten = ravel_pytree(params)
     grad = ravel_pytree(g)[0]
     assert float(jnp.max(jnp.abs(grad * flat))) > 1e-3 * abs(float(value)), g
-    if name == "toy":
-        # Along a random direction of the law parameters, against a float64 central difference with the same keys
-        # (common random numbers: the draws move with the parameters only).
-        d = jnp.asarray(np.random.default_rng(0).standard_normal(flat.shape))
-        h = 1e-4
-        at = eqx.filter_jit(lambda x: mean_metric(unflatten(x)))
-        fd = (float(at(flat + h * d)) - float(at(flat - h * d))) / (2 * h)
-        directional = float(grad @ d)
-        assert directional != 0.0
-        assert directional == pytest.approx(fd, rel=1e-6)
+    # Along a random direction of the law parameters, against a float64 central difference with the same keys
+    # (common random numbers: the draws move with the parameters only), relative step 1e-5 of each parameter; the
+    # values come from the program that computed the gradient (no second compilation).
+    d = jnp.asarray(np.random.default_rng(0).standard_normal(flat.shape)) * jnp.abs(flat)
+    h = 1e-5
+    vg = eqx.filter_jit(jax.value_and_grad(mean_metric))
+    fd = (float(vg(unflatten(flat + h * d))[0]) - float(vg(unflatten(flat - h * d))[0])) / (2 * h)
+    directional = float(grad @ d)
+    assert directional != 0.0
+    assert directional == pytest.approx(fd, rel=FD_REL.get(name, 1e-6)), (directional, fd)
 
 
 def test_a_short_run_writes_every_output(case, tmp_path, monkeypatch, capsys, example_run):

@@ -142,7 +142,7 @@ def _check(raw, kind, table_path, key, monkeypatch):
         assert re.search(r"\[[^\]]+\]|study file", msg), f"no table named: {msg}"
         named = [str(key)] + _names(table_path)
         assert any(n in msg for n in named), f"{kind} {'.'.join(map(str, table_path))} / {key!r}: message names neither: {msg}"
-        assert "\n" not in msg.strip() or "Traceback" not in msg
+        assert "Traceback" not in msg, msg
     # Anything other than a ConfigError propagates and fails the test.
 
 
