@@ -12,6 +12,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
+import sys
+import textwrap
 from pathlib import Path
 
 import equinox as eqx
@@ -140,6 +144,47 @@ def test_results_do_not_depend_on_the_chunk_size(case):
     a = gearte.monte_carlo(fn, key=3, n_samples=20, block_size=4, chunk_size=8).values
     b = gearte.monte_carlo(fn, key=3, n_samples=20, block_size=4, chunk_size=12).values
     np.testing.assert_array_equal(a, b)
+
+
+def test_every_drive_runs_on_two_devices_with_the_values_of_one(tmp_path):
+    """The `gearte` command shards the Monte Carlo over one CPU device per core: every registered drive's example must
+    run there and give the values of one device to the bit (8 samples, two blocks of 4, in a fresh interpreter with
+    two forced host devices, against this process's one). The helical drive's example failed there, with the drive's
+    arrays closed over in the per-device program, where one device passed."""
+    names = sorted(DRIVES)
+    one = {}
+    for name in names:
+        study = load_study(EXAMPLES[name])
+        fn = gearte.TEStudy(study.drive, study.errors, metric=study.metric)
+        r = gearte.monte_carlo(fn, key=3, n_samples=8, block_size=4, chunk_size=8, progress=False)
+        assert r.devices == 1
+        one[name] = r.values
+    script = textwrap.dedent(
+        f"""
+        import os
+        import jax, numpy as np
+        jax.config.update("jax_enable_x64", True)
+        import gearte
+        from gearte.cli.config import load_study
+        from gearte.core.cache import enable_compilation_cache
+        enable_compilation_cache(os.environ["GEARTE_CACHE_DIR"], programs=False)  # the suite's JAX cache (conftest)
+        out = {{}}
+        for name, path in {[(n, str(EXAMPLES[n])) for n in names]!r}:
+            study = load_study(path)
+            fn = gearte.TEStudy(study.drive, study.errors, metric=study.metric)
+            r = gearte.monte_carlo(fn, key=3, n_samples=8, block_size=4, chunk_size=8, progress=False)
+            assert r.devices == 2, r.devices
+            out[name] = r.values
+        np.savez({str(tmp_path / "two.npz")!r}, **out)
+        """
+    )
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    proc = subprocess.run([sys.executable, "-c", script], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    two = np.load(tmp_path / "two.npz")
+    for name in names:
+        np.testing.assert_array_equal(two[name], one[name], err_msg=name)
+        assert np.all(np.isfinite(one[name])), name
 
 
 def test_gradients_of_a_monte_carlo_mean_are_finite_and_match_central_differences(case):

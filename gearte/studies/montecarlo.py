@@ -135,14 +135,19 @@ def sample_mesh() -> jax.sharding.Mesh:
 def _step(fn_and_key, starts, block: int, mesh: jax.sharding.Mesh):
     """One block per device: device d computes the block starting at ``starts[d]`` with the same program,
     whatever the number of devices (`shard_map`), so results do not depend on the device count."""
-    fn, key = fn_and_key
     spec = jax.sharding.PartitionSpec("samples")
+    # The drive's and the errors' arrays enter the mapped function as its replicated arguments, not closed over: a
+    # closed-over array keeps its placement on the whole mesh, and JAX refuses to index it (a gather, as
+    # `stage.mass[kind]` in the helical drive) inside the per-device program.
+    arrays, static = eqx.partition(fn_and_key, eqx.is_array)
 
-    def per_device(start):
+    def per_device(local, start):
+        fn, key = eqx.combine(local, static)
         return jax.tree.map(lambda x: x[None], _block(fn, key, start[0], block))
 
     # check_vma=False: drives loop with carries built from constants (no per-device type annotations needed).
-    return jax.shard_map(per_device, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)(starts)
+    replicated = jax.sharding.PartitionSpec()
+    return jax.shard_map(per_device, mesh=mesh, in_specs=(replicated, spec), out_specs=spec, check_vma=False)(arrays, starts)
 
 
 _run_step = eqx.filter_jit(_step)
