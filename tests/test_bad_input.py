@@ -249,12 +249,20 @@ def test_gearte_cpu_devices_in_ascii_digits_only():
         assert r.returncode == 2 and r.stderr.startswith("gearte: error: GEARTE_CPU_DEVICES: a whole number"), (value, r.stderr)
 
 
-def test_out_of_memory_is_reported_plainly(capsys, tmp_path, monkeypatch):
+@pytest.mark.parametrize(
+    "text",
+    [
+        "RESOURCE_EXHAUSTED: Out of memory allocating 26388279066624 bytes.",
+        "INTERNAL: Failed to allocate buffer: Out of memory allocating 1814592322696 bytes.",  # the CPU runtime's form
+    ],
+    ids=["resource-exhausted", "internal"],
+)
+def test_out_of_memory_is_reported_plainly(text, capsys, tmp_path, monkeypatch):
     class JaxRuntimeError(RuntimeError):  # the name XLA's errors carry
         pass
 
     def exhausted(*a, **k):
-        raise JaxRuntimeError("RESOURCE_EXHAUSTED: Out of memory allocating 26388279066624 bytes.")
+        raise JaxRuntimeError(text)
 
     monkeypatch.setattr(run_mod, "_run", exhausted)
     err = refused(capsys, tmp_path, "run", RANDOM, "--out", tmp_path / "o", message="out of memory", computing=True)

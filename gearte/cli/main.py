@@ -267,7 +267,8 @@ def main(argv: list[str] | None = None) -> int:
         if _out_of_memory(e):
             print(
                 "gearte: error: out of memory: the study holds more than this machine has; reduce its sample counts "
-                "(--samples, [study] samples, or the samples of its [budget], [allocation], [sensitivity] or [doe] table)",
+                "(--samples, [study] samples, or the samples of its [budget], [allocation], [sensitivity] or [doe] table) "
+                "or the size of its model (the grid, slice or face counts of its [drive] tables)",
                 file=sys.stderr,
             )
             return 2
@@ -277,10 +278,12 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _out_of_memory(e: BaseException) -> bool:
-    """Whether `e` is Python's or XLA's out-of-memory error (XLA's comes as a runtime error, RESOURCE_EXHAUSTED)."""
+    """Whether `e` is Python's or XLA's out-of-memory error (XLA's comes as a runtime error: RESOURCE_EXHAUSTED, or
+    INTERNAL with "Out of memory allocating" where the CPU runtime fails to allocate a buffer)."""
     if isinstance(e, MemoryError):
         return True
-    return type(e).__name__ in ("JaxRuntimeError", "XlaRuntimeError") and "RESOURCE_EXHAUSTED" in str(e)
+    text = str(e)
+    return type(e).__name__ in ("JaxRuntimeError", "XlaRuntimeError") and ("RESOURCE_EXHAUSTED" in text or "Out of memory" in text)
 
 
 def _distributed(args) -> None:
