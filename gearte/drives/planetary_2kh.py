@@ -221,7 +221,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
         # Neighbouring planets must not clash (tip circles, standard addendum = m).
         order = sorted(a_ % (2 * math.pi) for a_ in angles)
         if n > 1:
-            gaps = [(order[(i + 1) % n] - order[i]) % (2 * math.pi) or 2 * math.pi for i in range(n)]
+            gaps = [(order[(i + 1) % n] - order[i]) % (2 * math.pi) for i in range(n)]  # 0: two planets at one place
             if 2 * a * math.sin(min(gaps) / 2) <= m * (zp + 2):
                 raise ValueError(
                     f"planets clash: {n} planets of {zp} teeth do not fit around a {zs}-tooth sun (planet tip circles overlap)"
