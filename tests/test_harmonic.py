@@ -524,6 +524,24 @@ def test_config_ok_and_tolerance_from_the_drive(tmp_path):
         ("z_circular_spline = 182", "z_circular_spline = 179", "z_circular_spline > z_flexspline"),
         ("pitch_diameter_mm = 90\n", "", "missing required key `pitch_diameter_mm`"),
         ("pitch_diameter_mm = 90\n", "pitch_diameter_mm = 90\n[drive.record]\ninput_rpm = 184\nduration_s = 10\n", "sample_rate_hz"),
+        # The record `gearte run` will take and the assembly phases, checked when the file is read (they were found
+        # only after the Monte Carlo).
+        (
+            "pitch_diameter_mm = 90\n",
+            "pitch_diameter_mm = 90\n[drive.record]\ninput_rpm = 184\nduration_s = 0.001\nsample_rate_hz = 4000\n",
+            r"\[drive.record\]: record: 0.001 s at 4000 Hz is only 4 samples \(at least 16\)",
+        ),
+        (
+            "pitch_diameter_mm = 90\n",
+            "pitch_diameter_mm = 90\n[drive.record]\ninput_rpm = 184\nduration_s = 10\nsample_rate_hz = 1e12\n",
+            r"\[drive.record\]: record: .* more than 50,000,000; lower sample_rate_hz or duration_s",
+        ),
+        (
+            "pitch_diameter_mm = 90\n",
+            "pitch_diameter_mm = 90\n[drive.record]\ninput_rpm = 184\nduration_s = 10\nsample_rate_hz = 4000\n"
+            "[drive.assembly]\nadjustable = ['cs', 'cs']\n",
+            r"\[drive.assembly\] adjustable: \['cs'\] named more than once",
+        ),
     ],
 )
 def test_config_errors(tmp_path, old, new, msg):

@@ -41,6 +41,26 @@ from .signal import TESignal, evaluate
 from .units import TWO_PI as _TWO_PI
 from .validate import check_option
 
+#: Fewest and most samples of a record (`record`).
+MIN_RECORD_SAMPLES, MAX_RECORD_SAMPLES = 16, 50_000_000
+
+
+def record_samples(duration_s: float, sample_rate_hz: float) -> int:
+    """The samples of a record `duration_s` long at `sample_rate_hz` (`record`), checked against `MIN_RECORD_SAMPLES` and
+    `MAX_RECORD_SAMPLES` (ValueError naming both keys)."""
+    n = int(round(duration_s * sample_rate_hz))
+    if n < MIN_RECORD_SAMPLES:
+        raise ValueError(
+            f"record: {duration_s:g} s at {sample_rate_hz:g} Hz is only {n} samples (at least {MIN_RECORD_SAMPLES}); "
+            "record longer (duration_s) or sample faster (sample_rate_hz)"
+        )
+    if n > MAX_RECORD_SAMPLES:
+        raise ValueError(
+            f"record: {duration_s:g} s at {sample_rate_hz:g} Hz is {n:,} samples, more than {MAX_RECORD_SAMPLES:,}; "
+            "lower sample_rate_hz or duration_s"
+        )
+    return n
+
 
 def _positive(name: str, value) -> float:
     try:
@@ -99,11 +119,7 @@ def record(signal: TESignal, *, input_rpm: float, duration_s: float, sample_rate
     rpm = _positive("input_rpm", input_rpm)
     dur = _positive("duration_s", duration_s)
     fs = _positive("sample_rate_hz", sample_rate_hz)
-    n = int(round(dur * fs))
-    if n < 16:
-        raise ValueError(f"record: {dur:g} s at {fs:g} Hz is only {n} samples; record longer or sample faster")
-    if n > 50_000_000:
-        raise ValueError(f"record: {n:,} samples is too many; lower sample_rate_hz or duration_s")
+    n = record_samples(dur, fs)
     t = float(start_s) + np.arange(n) / fs
     theta = _TWO_PI * rpm / 60.0 * t
     te = np.asarray(evaluate(signal, jnp.asarray(theta)))

@@ -28,6 +28,7 @@ from collections.abc import Sequence
 
 import equinox as eqx
 
+from ..core.records import record_samples
 from ..core.validate import as_float, as_int
 
 #: Error-source classes (Liu, sec. 2.2), and the kinds of tolerance each may hold.
@@ -214,6 +215,10 @@ class HarmonicRunSettings(eqx.Module):
         self.input_rpm = finite("input_rpm", input_rpm, positive=True)
         self.duration_s = finite("duration_s", duration_s, positive=True)
         self.sample_rate_hz = finite("sample_rate_hz", sample_rate_hz, positive=True)
+        record_samples(self.duration_s, self.sample_rate_hz)  # the record `gearte run` will take: checked now
         self.lines = whole("lines", lines, minimum=1)
         self.adjustable = tuple(adjustable)
+        repeated = sorted({x for x in self.adjustable if self.adjustable.count(x) > 1})
+        if repeated:
+            raise ValueError(f"adjustable: {repeated} named more than once; name each source once")
         self.assembly_starts = whole("assembly_starts", assembly_starts, minimum=1)
