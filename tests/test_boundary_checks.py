@@ -249,3 +249,23 @@ def test_every_random_result_takes_an_explicit_key_or_seed():
     assert len(checked) >= 15, checked  # the survey reached the API (identify, monte_carlo, allocate_*, designs, …)
     assert not wrong, wrong
     assert gearte.SobolSequence(16, scramble=False).points(2).shape == (16, 2)
+
+
+@pytest.mark.parametrize(
+    "freqs, shown",
+    [
+        ((1, "7/2400001"), "makes 2400001 periods"),  # a long hyper-period: 2,400,001 input revolutions
+        ((1, 1e20), "makes 1e+20 periods"),  # a huge frequency
+        ((1, "0.29166666666666666666666"), "5e+22 input revolutions"),  # a decimal string read exactly
+    ],
+)
+def test_explicit_frequencies_whose_exact_extrema_would_not_fit_are_refused(freqs, shown):
+    """The exact extrema sample every period of the fastest term over the hyper-period (16 points each): frequencies
+    that make that grid billions of points are refused when the drive is built, not when it runs out of memory."""
+    from gearte.drives.explicit import MAX_PERIODS
+
+    with pytest.raises(ValueError, match=f"more than {MAX_PERIODS:,}") as e:
+        ExplicitDrive([ExplicitTerm("a", freqs[0]), ExplicitTerm("b", freqs[1])], gain=GAIN)
+    assert shown in str(e.value)
+    # At the bound itself the drive is built.
+    ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", MAX_PERIODS)], gain=GAIN)
