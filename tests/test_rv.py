@@ -622,6 +622,12 @@ def test_the_bearing_polygon_is_an_option_of_the_drive_and_its_study_file(tmp_pa
     assert s.faces == 16 and make().bearing_faces == 64
     with pytest.raises(ValueError, match="bearing_faces"):
         make(bearing_faces=4)
+    with pytest.raises(ValueError, match="bearing_faces: 100,000,000 faces, more than 4,096"):
+        make(bearing_faces=100_000_000)  # took gigabytes before it was refused
+    # A load outside the small-load window is refused, naming the key (10 mm gave a lost motion of 14.6′, silently).
+    for bad in (10.0, 1e-300):
+        with pytest.raises(ValueError, match=r"deflection_mm: .* is outside 1e-13 … 1e-05 mm"):
+            make(deflection_mm=bad)
     text = (Path(__file__).resolve().parents[1] / "examples" / "rv_robot_joint.toml").read_text()
     head, sep, tail = text.partition("[drive.model]")
     assert sep
