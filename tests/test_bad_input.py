@@ -186,8 +186,13 @@ def test_a_pipe_a_device_or_a_huge_file_as_the_study_file(capsys, tmp_path, monk
         ),
         ("[errors.carrier_assembly]", "[erors.carrier_assembly]", "unknown table `[erors]` (did you mean `[errors]`?)"),
         ("samples = 50000", "samples = 4294967296", "[study] samples: at most 2³² − 1"),
+        (
+            "tolerance_um = 16",
+            "tolerance_um = 1e20",
+            "tolerance_um: 1e+20 µm is more than 100,000 µm (100 mm): lengths ending in _um are micrometres",
+        ),
     ],
-    ids=["misspelt source", "misspelt table", "samples beyond one key"],
+    ids=["misspelt source", "misspelt table", "samples beyond one key", "micrometres beyond 100 mm"],
 )
 def test_study_file_mistakes_named_by_check_and_run(old, new, message, capsys, tmp_path, monkeypatch):
     text = RANDOM.read_text()

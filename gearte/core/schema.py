@@ -31,6 +31,11 @@ class OptionError(ConfigError):
 _MISSING = object()
 
 
+#: Largest magnitude of a value given in micrometres (a key ending in ``_um``): tolerances and errors of gear parts are
+#: microns; 100 mm is beyond any of them, and far larger values overflow the statistics and plots.
+MAX_MICROMETRES = 1e5
+
+
 class Table:
     """A TOML table being read: tracks which keys were used, so leftovers are reported."""
 
@@ -105,6 +110,8 @@ class Table:
             self._fail(
                 key, f"must be ≥ {minimum:g}, got {v:g}" + (" (tolerances and magnitudes cannot be negative)" if minimum == 0 else "")
             )
+        if key.endswith("_um") and "_per_" not in key and abs(v) > MAX_MICROMETRES:
+            self._fail(key, f"{v:g} µm is more than {MAX_MICROMETRES:,.0f} µm (100 mm): lengths ending in _um are micrometres")
         return v
 
     def boolean(self, key: str, default: Any = _MISSING) -> bool:
