@@ -263,6 +263,29 @@ def test_parameter_files_name_the_table_and_key_of_a_bad_number(tmp_path):
     assert load_helical(path).stage.z_sun == 21  # a float with no fractional part is a whole number
 
 
+def test_parameter_files_refuse_unknown_tables_and_keys(tmp_path):
+    """A misspelt key would leave its default in force silently: every table and key of the file must be one the
+    format has, named with the nearest one."""
+    text = EXAMPLE.read_text(encoding="utf-8")
+    path = tmp_path / "bad.toml"
+    for old, new, msg in (
+        ("n_slices = 8", "n_slice = 8", r"bad\.toml \[model\]: unknown key `n_slice` \(did you mean `n_slices`\?\)"),
+        (
+            "contact_smoothing_um",
+            "contact_smoothing_mm",
+            r"\[model\]: unknown key `contact_smoothing_mm` \(did you mean `contact_smoothing_um`\?\)",
+        ),
+        ("power_kw", "foo = 1\npower_kw", r"\[operation\]: unknown key `foo`"),
+        ("[members.carrier]", "[members.carier]", r"\[members\]: unknown key `carier` \(did you mean `carrier`\?\)"),
+        ("[members.carrier]\nmass_kg", "[members.carrier]\nmas_kg = 1\nmass_kg", r"\[members.carrier\]: unknown key `mas_kg`"),
+        ("[model]", "[extra]\nx = 1\n[model]", r"bad\.toml: unknown table `\[extra\]`"),
+    ):
+        assert old in text, old
+        path.write_text(text.replace(old, new, 1), encoding="utf-8")
+        with pytest.raises(ValueError, match=msg):
+            load_helical(path)
+
+
 def test_tip_relief_and_crowning_values():
     g_alpha, pbt = 48.0, 30.0
     default = g_alpha - pbt  # from the single/double-contact boundary to the tip

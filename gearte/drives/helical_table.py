@@ -10,6 +10,7 @@ checked without it; `gearte.drives.helical.load_helical` builds the dynamic mode
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import tomllib
 from collections.abc import Mapping
@@ -70,6 +71,47 @@ def _stiffness_model(model: Mapping, where: str) -> AbstractStiffnessModel:
     return by_name[name]()
 
 
+#: Every table of a stage parameter file and its keys (`read_stage_file`); members and supports have one table per
+#: member (`MEMBERS`).
+_KEYS = {
+    "gears": {"z_sun", "z_planet", "z_ring", "n_planets", "normal_module_mm", "normal_pressure_angle_deg", "helix_angle_deg",
+              "face_width_mm", "sun_hand"},
+    "mesh": {"stiffness_external", "stiffness_internal", "damping_ratio", "lead_mismatch_external_um", "lead_mismatch_internal_um"},
+    "operation": {"power_kw", "carrier_speed_rpm"},
+    "model": {"n_slices", "stiffness_model", "contact_smoothing_um", "n_periods", "steps_per_period", "samples_per_period"},
+    "members": {"mass_kg", "polar_inertia_kgm2", "tilt_inertia_kgm2"},
+    "supports": {*_DIRS, "damping_ratio"},
+}  # fmt: skip
+
+
+def _unknown(keys, allowed, where: str) -> None:
+    for k in keys:
+        if k not in allowed:
+            near = difflib.get_close_matches(str(k), sorted(allowed), n=1)
+            hint = f" (did you mean `{near[0]}`?)" if near else ""
+            raise ValueError(f"{where}: unknown key `{k}`{hint}; allowed: {', '.join(sorted(allowed))}")
+
+
+def _known_keys(data: Mapping, w: str) -> None:
+    """Refuse a table or key the file format does not have, naming it (a misspelt key would leave its default)."""
+    for k in data:
+        if k not in _KEYS:
+            near = difflib.get_close_matches(str(k), sorted(_KEYS), n=1)
+            hint = f" (did you mean `[{near[0]}]`?)" if near else ""
+            raise ValueError(f"{w}: unknown table `[{k}]`{hint}; allowed: {', '.join(f'[{t}]' for t in _KEYS)}")
+    for name, allowed in _KEYS.items():
+        t = data.get(name)
+        if not isinstance(t, Mapping):
+            continue  # missing or not a table: reported where it is read
+        if name in ("members", "supports"):
+            _unknown(t, set(MEMBERS), f"{w} [{name}]")
+            for m, sub in t.items():
+                if isinstance(sub, Mapping):
+                    _unknown(sub, allowed, f"{w} [{name}.{m}]")
+        else:
+            _unknown(t, allowed, f"{w} [{name}]")
+
+
 def read_stage_file(path: str | Path) -> StageFile:
     """Read a helical stage parameter file. A missing table or key, or a value of the wrong kind, raises a
     ValueError naming the file, table and key; a file that is not TOML, one naming the line."""
@@ -79,6 +121,7 @@ def read_stage_file(path: str | Path) -> StageFile:
     except tomllib.TOMLDecodeError as e:
         raise ValueError(f"{path.name}: not a valid TOML file: {e}") from None
     w = path.name
+    _known_keys(data, w)
     g = _section(data, "gears", w)
     members = _section(data, "members", w)
     sup = _section(data, "supports", w)
