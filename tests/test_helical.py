@@ -254,6 +254,9 @@ def test_parameter_files_name_the_table_and_key_of_a_bad_number(tmp_path):
         ("n_slices = 8", 'n_slices = "8"', r"bad\.toml \[model\]\.n_slices: must be a whole number, got '8'"),
         ("n_periods = 20", "n_periods = 0", r"bad\.toml \[model\]\.n_periods: must be ≥ 1, got 0"),
         ("carrier_speed_rpm = 22", "carrier_speed_rpm = 0", r"bad\.toml \[operation\]\.carrier_speed_rpm: must be > 0, got 0"),
+        ("power_kw = 750.0", "power_kw = nan", r"bad\.toml \[operation\]\.power_kw: must be a finite number, got nan"),
+        # Five planets of 39 teeth around 21: centres 359.9 mm apart, tip circles 418 mm (four fit: 433 mm).
+        ("n_planets = 3", "n_planets = 5", r"bad\.toml: n_planets: planets clash: 5 planets .* 359\.9 mm apart, .* 418\.0 mm"),
     ):
         assert old in text
         path.write_text(text.replace(old, new), encoding="utf-8")

@@ -155,9 +155,22 @@ class HelicalStage(eqx.Module):
                 raise ValueError(
                     f"planet_angles: planet {i + 1} at {math.degrees(ang - angles[0]):.6g}° cannot be assembled: (z_sun + z_ring)·Ψ/360° = {q:.6g} must be whole"
                 )
+        mn = as_float("normal_module", normal_module, positive=True, hint="mm")
+        # Neighbouring planets must not clash: planet tip circles (standard addendum m_n) within the distance of their
+        # centres, 2 a sin(ΔΨ/2), a = m_t (z_sun + z_planet)/2, m_t = m_n / cos β.
+        if n > 1:
+            a = mn / math.cos(beta) * (zs + zp) / 2
+            tip = mn / math.cos(beta) * zp + 2 * mn
+            order = sorted(x % (2 * math.pi) for x in angles)
+            gap = min((order[(i + 1) % n] - order[i]) % (2 * math.pi) for i in range(n))
+            if 2 * a * math.sin(gap / 2) <= tip:
+                raise ValueError(
+                    f"n_planets: planets clash: {n} planets of {zp} teeth around a {zs}-tooth sun, their centres "
+                    f"{2 * a * math.sin(gap / 2):.1f} mm apart, have tip circles of {tip:.1f} mm diameter"
+                )
         self.z_sun, self.z_planet, self.z_ring, self.n_planets = zs, zp, zr, n
         self.sun_hand = 1 if sun_hand == "right" else -1
-        self.normal_module = jnp.asarray(as_float("normal_module", normal_module, positive=True, hint="mm"))
+        self.normal_module = jnp.asarray(mn)
         self.normal_pressure_angle = jnp.asarray(alpha)
         self.helix_angle = jnp.asarray(beta)
         self.face_width = jnp.asarray(as_float("face_width", face_width, positive=True, hint="mm"))

@@ -141,10 +141,29 @@ def read_stage_file(path: str | Path) -> StageFile:
         stiff.append([_num(t, d, f"{w} [supports.{m}]") for d in _DIRS])
         zeta.append(_num(t, "damping_ratio", f"{w} [supports.{m}]"))
     speed = as_float(f"{opw}.carrier_speed_rpm", _num(op, "carrier_speed_rpm", opw), positive=True)
-    stage = HelicalStage(
-        _whole(g, "z_sun", gw),
-        _whole(g, "z_planet", gw),
-        _whole(g, "z_ring", gw),
+    power = as_float(f"{opw}.power_kw", _num(op, "power_kw", opw))
+    fields = _stage_fields(g, gw, meshw, mesh, per_member, stiff, zeta, power, speed)
+    try:
+        stage = HelicalStage(**fields)
+    except ValueError as e:  # the stage's own checks name its fields; the file's name goes first
+        raise ValueError(f"{w}: {e}") from None
+    return StageFile(
+        stage,
+        n_slices=_whole(model, "n_slices", mw, 8),
+        stiffness_model=_stiffness_model(model, mw),
+        contact_smoothing=_num(model, "contact_smoothing_um", mw) if "contact_smoothing_um" in model else 0.02,
+        n_periods=_whole(model, "n_periods", mw, 20),
+        steps_per_period=_whole(model, "steps_per_period", mw, 256),
+        samples_per_period=_whole(model, "samples_per_period", mw, 128),
+    )
+
+
+def _stage_fields(g, gw, meshw, mesh, per_member, stiff, zeta, power, speed) -> dict:
+    """The arguments of the `HelicalStage` of a parameter file's tables, each read and checked against its key."""
+    return dict(
+        z_sun=_whole(g, "z_sun", gw),
+        z_planet=_whole(g, "z_planet", gw),
+        z_ring=_whole(g, "z_ring", gw),
         normal_module=_num(g, "normal_module_mm", gw),
         normal_pressure_angle=math.radians(_num(g, "normal_pressure_angle_deg", gw)),
         helix_angle=math.radians(_num(g, "helix_angle_deg", gw)),
@@ -158,19 +177,10 @@ def read_stage_file(path: str | Path) -> StageFile:
         support_damping_ratio=[[z] * 6 for z in zeta],
         mesh_stiffness=[_num(mesh, "stiffness_external", meshw), _num(mesh, "stiffness_internal", meshw)],
         mesh_damping_ratio=_num(mesh, "damping_ratio", meshw),
-        carrier_torque=_num(op, "power_kw", opw) * 1e3 / (speed * 2 * math.pi / 60),
+        carrier_torque=power * 1e3 / (speed * 2 * math.pi / 60),
         carrier_speed=speed,
         lead_mismatch=[
             _num(mesh, "lead_mismatch_external_um", meshw) if "lead_mismatch_external_um" in mesh else 0.0,
             _num(mesh, "lead_mismatch_internal_um", meshw) if "lead_mismatch_internal_um" in mesh else 0.0,
         ],
-    )
-    return StageFile(
-        stage,
-        n_slices=_whole(model, "n_slices", mw, 8),
-        stiffness_model=_stiffness_model(model, mw),
-        contact_smoothing=_num(model, "contact_smoothing_um", mw) if "contact_smoothing_um" in model else 0.02,
-        n_periods=_whole(model, "n_periods", mw, 20),
-        steps_per_period=_whole(model, "steps_per_period", mw, 256),
-        samples_per_period=_whole(model, "samples_per_period", mw, 128),
     )
