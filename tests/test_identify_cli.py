@@ -47,3 +47,25 @@ def test_an_unknown_adjust_source_is_refused_before_the_fit(tmp_path, capsys, mo
     err = capsys.readouterr().err
     assert err.startswith("gearte: error: --adjust: 'nosuchsource': not an error source") and "Traceback" not in err
     assert not any(tmp_path.iterdir())
+
+
+def test_parts_files_are_refused_naming_the_file_and_its_own_line(tmp_path, capsys):
+    """Parts CSV mistakes name the file and the line as the file numbers it (comments and blank lines counted)."""
+    ok = "sun_manufacturing,1,0\n" + "planet_manufacturing,1,0\n" * 3 + "ring_manufacturing,1,0\n"  # one drive
+    cases = [
+        ("binary", b"source,magnitude_um,phase_rad\n\xff\xfe,1,0\n", "not a UTF-8 text file"),
+        (
+            "both",
+            "source,magnitude_um,phase_rad,phase_deg\nsun_manufacturing,1,0,0\n",
+            "line 1: the header names both phase_rad and phase_deg",
+        ),
+        ("comment", "# measured 2026-11-28\n\nsource,magnitude_um,phase_rad\n" + ok + "sun_manufacturing,-1,0\n", "line 9: the magnitude"),
+        ("uneven", "source,magnitude_um,phase_rad\n" + ok + "sun_manufacturing,2,0\n", "drives but the other part types make"),
+    ]
+    for name, text, message in cases:
+        parts = tmp_path / f"{name}.csv"
+        (parts.write_bytes if isinstance(text, bytes) else parts.write_text)(text)  # type: ignore[operator]
+        assert cli.main(["assemble", str(parts), "--study", str(STUDY), "--out", str(tmp_path / "a")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"gearte: error in config: {parts}: ") and message in err and "Traceback" not in err, (name, err)
+    assert not (tmp_path / "a").exists()

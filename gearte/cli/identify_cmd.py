@@ -198,19 +198,29 @@ def _plot_identify(diag, conv: float, sym: str, path: Path, rec) -> None:
 
 
 def _read_parts(path: str, drive) -> dict[str, Eccentricity]:
+    """The parts of a CSV file: a header naming source, magnitude_um and one of phase_rad, phase_deg, then one row per
+    part. Blank lines and lines starting with # are skipped; errors name the file's own line numbers."""
     try:
-        lines = [ln for ln in Path(path).read_text(encoding="utf-8").splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+        text = Path(path).read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: not a UTF-8 text file (byte {e.start}); save the parts as CSV text") from None
+    lines = [(i, ln) for i, ln in enumerate(text.splitlines(), start=1) if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         raise ConfigError(f"{path}: empty; give a header source,magnitude_um,phase_rad and one row per part")
-    head = [h.strip() for h in lines[0].split(",")]
+    head = [h.strip() for h in lines[0][1].split(",")]
+    if "phase_rad" in head and "phase_deg" in head:
+        raise ConfigError(f"{path}: line {lines[0][0]}: the header names both phase_rad and phase_deg; keep one")
+    repeated = sorted({h for h in head if head.count(h) > 1})
+    if repeated:
+        raise ConfigError(f"{path}: line {lines[0][0]}: the header names {', '.join(repeated)} more than once")
     phase_col = "phase_rad" if "phase_rad" in head else "phase_deg" if "phase_deg" in head else None
     if "source" not in head or "magnitude_um" not in head or phase_col is None:
         raise ConfigError(f"{path}: the header must name source, magnitude_um and phase_rad (or phase_deg), got {', '.join(head)}")
     specs = drive.error_sources
     data: dict[str, list[tuple[float, float]]] = {}
-    for i, ln in enumerate(lines[1:], start=2):
+    for i, ln in lines[1:]:
         cells = [c.strip() for c in ln.split(",")]
         if len(cells) != len(head):
             raise ConfigError(f"{path}: line {i}: {len(cells)} values for {len(head)} columns")
@@ -233,7 +243,12 @@ def run_assemble(args, command: str) -> int:
     drive = _sinusoidal(study, args.study)
     parts = _read_parts(args.parts, drive)
     with atomic_output_dir(args.out, inputs=[args.study, args.parts]) as tmp:
-        out = assemble_batch(drive, parts, key=args.seed, metric=study.metric, random_batches=args.random_batches)
+        try:
+            out = assemble_batch(drive, parts, key=args.seed, metric=study.metric, random_batches=args.random_batches)
+        except ValueError as e:
+            if str(e).startswith("parts"):  # the batch's own checks (counts of each part type): name the file
+                raise ConfigError(f"{args.parts}: {str(e).removeprefix('parts: ')}") from None
+            raise
         unit = study.unit
         sym = UNIT_SYMBOLS[unit]
         conv = float(angle_from_rad(1.0, unit))
