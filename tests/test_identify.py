@@ -2,6 +2,7 @@
 rule (and its separation by a second record with a known turn), the Jacobian against finite differences, bad records."""
 
 import math
+import warnings
 from pathlib import Path
 
 import jax
@@ -236,11 +237,17 @@ def test_read_record_forms_agree(tmp_path, planetary):
         ),
         ("time_s,te_arcsec\n" + "\n".join(f"{i * 0.1},1" for i in range(20)), "needs the input speed"),
         ("input_angle_rad,te_arcsec\n" + "\n".join(f"{i * 0.1},nan" for i in range(20)), "not a finite number"),
+        # The file's own line numbers (the header is line 2 here), and no reader's warning or 0-based row.
+        ("# input_rpm = 60\ninput_angle_rad,te_arcsec\n0,1\n0.1,abc\n", r"line 4: 'abc' is not a number"),
+        ("input_angle_rad,te_arcsec\n0,1\n0.1,1,2\n", r"line 3: 3 values but 2 column names"),
+        ("input_angle_rad,te_arcsec\n\n# nothing measured\n", "no data rows below the header"),
     ],
 )
 def test_bad_records_are_refused(tmp_path, text, message):
-    with pytest.raises(RecordError, match=message):
-        read_record(_csv(tmp_path, text))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a reader's own warning (an empty file) would reach the user
+        with pytest.raises(RecordError, match=message):
+            read_record(_csv(tmp_path, text))
 
 
 def test_too_short_or_too_slow_record_says_how_long(planetary):

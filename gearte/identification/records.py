@@ -22,7 +22,6 @@ drive's model is evaluated on. Records are NumPy arrays: reading is not part of 
 
 from __future__ import annotations
 
-import io
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -169,15 +168,30 @@ def _read_csv(path: Path) -> tuple[list[str], np.ndarray, dict[str, float]]:
     else:
         _fail(src, "no header line (e.g. input_angle_rad,te_arcsec)")
     header = [h.strip() for h in lines[body_start].split(",")]
-    try:
-        data = np.loadtxt(io.StringIO("\n".join(lines[body_start + 1 :])), delimiter=",", ndmin=2, comments="#")
-    except ValueError as e:
-        _fail(src, f"cannot read the numbers below the header ({e})")
-    if data.size == 0:
+    rows = []
+    for n, line in enumerate(lines[body_start + 1 :], start=body_start + 2):  # the file's own line numbers
+        s = line.split("#", 1)[0].strip()
+        if not s:
+            continue
+        cells = [c.strip() for c in s.split(",")]
+        if len(cells) != len(header):
+            _fail(src, f"line {n}: {len(cells)} values but {len(header)} column names in the header")
+        try:
+            rows.append([float(c) for c in cells])
+        except ValueError:
+            bad = next(c for c in cells if not _is_number(c))
+            _fail(src, f"line {n}: {bad!r} is not a number")
+    if not rows:
         _fail(src, "no data rows below the header")
-    if data.shape[1] != len(header):
-        _fail(src, f"{data.shape[1]} numbers per row but {len(header)} column names in the header")
-    return header, data, meta
+    return header, np.asarray(rows, dtype=np.float64), meta
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _read_npz(path: Path) -> tuple[list[str], np.ndarray, dict[str, float]]:
