@@ -247,6 +247,12 @@ def test_budget_example_through_gearte_run(tmp_path):
             r"\[errors.sun_manufacturing.magnitude\] truncate_at_tolerance: the tolerance is 0",
         ),
         (lambda t: t.replace("maximum_factor = 10.0", "maximum_factor = 0.5"), "maximum_factor"),
+        # The grades' ISO ranges, checked when the file is read (the run had reported "none" for every grade).
+        (
+            lambda t: t.replace("module_mm = 1.0", "module_mm = 100", 1),
+            r"\[budget.grades.sun_manufacturing\] module_mm: module = 100 mm is outside the range of ISO 1328-1:2013",
+        ),
+        (lambda t: t.replace("diameter_mm = 12.0", "diameter_mm = 1e9", 1), r"diameter_mm: diameter = 1e\+09 mm is outside"),
     ],
 )
 def test_bad_budget_configs(edit, match, tmp_path):

@@ -14,7 +14,7 @@ from ..drives.protocol import Figure
 from ..optimise.budget_model import Constraint, budget_problem
 from ..optimise.costs import Exponential, GradeTable, Power, Reciprocal, ReciprocalSquare
 from ..optimise.statistics import MeanKSigma, Yield, binomial_se
-from ..standards.iso1328 import nearest_grade
+from ..standards.iso1328 import check_length, nearest_grade
 from ..studies.errors import ErrorModel, ErrorSource
 from ..studies.laws import FixedPhase, RelativePhase, UniformPhase
 from .allocation_kind import kind_key
@@ -170,6 +170,12 @@ class Budget(AbstractStudyKind):
                     "diameter": g.number("diameter_mm", positive=True),
                     "face_width": g.number("face_width_mm", positive=True) if g.has("face_width_mm") else None,
                 }
+                for key in ("module", "diameter", "face_width"):  # the standard's range, checked before the run
+                    if grades[n][key] is not None:
+                        try:
+                            check_length(key, grades[n][key], grades[n]["standard"])
+                        except ValueError as e:
+                            raise ConfigError(f"{g.where} {key}_mm: {e}") from None
                 g.finish()
             gt.finish()
         pareto = t.get("pareto_specs", [])

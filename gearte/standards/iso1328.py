@@ -71,6 +71,12 @@ def _quantity(quantity: str) -> str:
     return quantity
 
 
+def check_length(name: str, value, standard: str) -> float:
+    """`value` (mm) as a finite length within the range of ISO `standard` for `name` (``"module"``, ``"diameter"``
+    or ``"face_width"``); ValueError naming it and the range otherwise."""
+    return _length(name, value, standard)
+
+
 def _length(name: str, value, standard: str) -> float:
     """A finite length in mm within the standard's range."""
     try:
