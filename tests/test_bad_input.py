@@ -191,8 +191,9 @@ def test_a_pipe_a_device_or_a_huge_file_as_the_study_file(capsys, tmp_path, monk
             "tolerance_um = 1e20",
             "tolerance_um: 1e+20 µm is more than 100,000 µm (100 mm): lengths ending in _um are micrometres",
         ),
+        ("tolerance_um = 16", "tolerance_deg = 16", "tolerance_deg: this source is a length; give `tolerance_um`"),
     ],
-    ids=["misspelt source", "misspelt table", "samples beyond one key", "micrometres beyond 100 mm"],
+    ids=["misspelt source", "misspelt table", "samples beyond one key", "micrometres beyond 100 mm", "an angle for a length"],
 )
 def test_study_file_mistakes_named_by_check_and_run(old, new, message, capsys, tmp_path, monkeypatch):
     text = RANDOM.read_text()

@@ -305,10 +305,8 @@ def read_errors(top: Table, drive: AbstractDrive) -> tuple[ErrorModel, dict[str,
 
 def _tolerance(t: Table, spec: SourceSpec) -> float | None:
     declared = spec.tolerance
-    if spec.unit == "µm":
-        tol = t.number("tolerance_um", None, minimum=0) if t.has("tolerance_um") else None
-    else:
-        tol = _angle_value(t, "tolerance", minimum=0)
+    # tolerance_um for a length, tolerance_arcsec (…) for an angle; the other unit is refused, naming the one to give.
+    tol = _length_or_angle(t, "tolerance", spec, None, minimum=0)
     if tol is None:
         return declared
     if declared is not None and tol != declared:
