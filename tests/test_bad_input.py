@@ -192,8 +192,17 @@ def test_a_pipe_a_device_or_a_huge_file_as_the_study_file(capsys, tmp_path, monk
             "tolerance_um: 1e+20 µm is more than 100,000 µm (100 mm): lengths ending in _um are micrometres",
         ),
         ("tolerance_um = 16", "tolerance_deg = 16", "tolerance_deg: this source is a length; give `tolerance_um`"),
+        # an optional key (read only where present) is among the allowed ones, and the nearest
+        ("seed = 1001", "seed = 1001\nchunk_sise = 5", "unknown key `chunk_sise` (did you mean `chunk_size`?); allowed here: chunk_size,"),
     ],
-    ids=["misspelt source", "misspelt table", "samples beyond one key", "micrometres beyond 100 mm", "an angle for a length"],
+    ids=[
+        "misspelt source",
+        "misspelt table",
+        "samples beyond one key",
+        "micrometres beyond 100 mm",
+        "an angle for a length",
+        "optional key misspelt",
+    ],
 )
 def test_study_file_mistakes_named_by_check_and_run(old, new, message, capsys, tmp_path, monkeypatch):
     text = RANDOM.read_text()
@@ -516,3 +525,11 @@ def test_version():
         env=env,
     )
     assert p.returncode == 0 and p.stdout.strip() == f"gearte {gearte.__version__}"
+
+
+def test_a_byte_order_mark_before_the_toml_is_dropped(tmp_path, capsys):
+    """Some editors start a UTF-8 file with a byte-order mark, which TOML does not allow: it is dropped."""
+    cfg = tmp_path / "bom.toml"
+    cfg.write_bytes(b"\xef\xbb\xbf" + RANDOM.read_bytes())
+    assert cli.main(["check", str(cfg)]) == 0
+    assert "OK" in capsys.readouterr().out

@@ -101,7 +101,7 @@ def read_toml(path: Path) -> dict:
     except OSError as e:
         raise ConfigError(f"{path}: cannot read ({e.strerror})") from None
     try:
-        text = data.decode("utf-8")
+        text = data.decode("utf-8").removeprefix("\ufeff")  # a byte-order mark some editors write: not TOML, dropped
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not a UTF-8 text file; a study file is TOML text (see docs/study-files.md)") from None
     try:

@@ -43,6 +43,8 @@ class Table:
         if not isinstance(data, dict):
             raise ConfigError(f"{where}: expected a table (key = value pairs), got {type(data).__name__}")
         self.data, self.where, self.used = data, where, set()
+        #: Keys a reader asked about with `has` (optional keys): named with the used ones as allowed.
+        self.asked: set[str] = set()
         #: The study file's folder (file names in the table are relative to it); None: the working directory.
         self.folder = folder
 
@@ -60,6 +62,7 @@ class Table:
         raise ConfigError(f"{self.where} {key}: {msg}")
 
     def has(self, key: str) -> bool:
+        self.asked.add(key)
         return key in self.data
 
     def get(self, key: str, default: Any = _MISSING) -> Any:
@@ -147,11 +150,12 @@ class Table:
         unknown = [k for k in self.data if k not in self.used]
         if unknown:
             k = unknown[0]
-            hint = difflib.get_close_matches(k, sorted(self.used), n=1)
+            allowed = sorted(self.used | self.asked)
+            hint = difflib.get_close_matches(k, allowed, n=1)
             raise ConfigError(
                 f"{self.where}: unknown key `{k}`"
                 + (f" (did you mean `{hint[0]}`?)" if hint else "")
-                + f"; allowed here: {', '.join(sorted(self.used))}"
+                + f"; allowed here: {', '.join(allowed)}"
             )
 
 
