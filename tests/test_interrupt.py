@@ -136,3 +136,33 @@ def test_interrupt_while_writing_and_a_swallowed_interrupt(previous, tmp_path, m
     assert run("run", RANDOM, "--out", fresh, "--samples", 64) == 130
     assert sorted(x.name for x in tmp_path.iterdir()) == ["res"]  # nor the parent folders made for it
     assert io.interrupt_received() is None  # the command line leaves no state behind
+
+
+def _dead_pid() -> int:
+    """A process id that no process holds now (a child that has ended and been reaped)."""
+    p = subprocess.Popen([sys.executable, "-c", "pass"])
+    p.wait()
+    return p.pid
+
+
+def test_a_killed_runs_working_folders_are_cleared_and_its_moved_result_put_back(previous, tmp_path, capsys):
+    """SIGKILL cannot be caught: a run killed while writing leaves its new results beside the folder, and one killed
+    between its two renames the previous result moved aside. The next run into the folder clears them (only those of
+    processes that are gone, on this host) and, where the folder itself is missing, puts the previous result back."""
+    host = io.socket.gethostname().replace("-", "_")
+    dead, live = _dead_pid(), os.getpid()
+    out = tmp_path / "res"
+    moved = tmp_path / f".res.old-{dead}@{host}-abc123"
+    moved.mkdir()
+    shutil.copytree(previous, moved / "previous")
+    partial = tmp_path / f".res.partial-{dead}@{host}-def456"
+    partial.mkdir()
+    (partial / "summary.json").write_text("{")
+    running = tmp_path / f".res.partial-{live}@{host}-ghi789"  # a run still going: left alone
+    running.mkdir()
+    before = snapshot(previous)
+    with io.atomic_output_dir(out) as tmp:
+        assert snapshot(out) == before  # put back before the new run writes anything
+        (tmp / "note.txt").write_text("new")
+    assert not moved.exists() and not partial.exists() and running.is_dir()
+    assert snapshot(out) == {"note.txt": b"new"}

@@ -22,6 +22,7 @@ import json
 import os
 import shutil
 import signal
+import socket
 import sys
 import tempfile
 from collections.abc import Iterable, Iterator
@@ -239,8 +240,9 @@ def atomic_output_dir(path: str | Path, *, inputs: Iterable[str | Path] = (), op
                     _remove_created(created)
                     raise OutputError(f"{option} {path}: cannot create {parent} ({e.strerror}); choose another {option}") from None
                 created.append(parent)
+        _clear_stale(path)
         try:
-            tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
+            tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-{_owner()}-", dir=path.parent))
         except OSError as e:
             _remove_created(created)
             raise OutputError(f"{option} {path}: cannot write in {path.parent} ({e.strerror}); choose another {option}") from None
@@ -257,7 +259,7 @@ def atomic_output_dir(path: str | Path, *, inputs: Iterable[str | Path] = (), op
             check_output(path, inputs=inputs, option=option)  # still ours to replace
             old = None
             if path.exists():
-                old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-", dir=path.parent))
+                old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-{_owner()}-", dir=path.parent))
                 try:
                     os.rename(path, old / "previous")
                 except OSError as e:
@@ -288,6 +290,39 @@ def atomic_output_dir(path: str | Path, *, inputs: Iterable[str | Path] = (), op
                 f"choose another {option})"
             ) from None
         raise
+
+
+def _owner() -> str:
+    """This process, as the working folders beside a results folder name it: ``PID@HOST``."""
+    return f"{os.getpid()}@{socket.gethostname().replace('-', '_')}"
+
+
+def _clear_stale(path: Path) -> None:
+    """Remove the working folders a killed run (SIGKILL, a power cut) left beside `path`: its new results
+    (``.NAME.partial-PID@HOST-…``) and, where it had moved the previous result aside (``.NAME.old-PID@HOST-…``), that
+    result is put back if `path` is missing, else removed. Only folders of this host whose process is gone."""
+    host = socket.gethostname().replace("-", "_")
+    for kind in ("old", "partial"):  # the previous result first: it may be put back
+        for p in sorted(path.parent.glob(f".{path.name}.{kind}-*@{host}-*")):
+            pid = p.name[len(f".{path.name}.{kind}-") :].partition("@")[0]
+            if not pid.isdigit() or _alive(int(pid)):
+                continue
+            with contextlib.suppress(OSError):
+                if kind == "old" and (p / "previous").is_dir() and not path.exists():
+                    os.rename(p / "previous", path)
+                shutil.rmtree(p)
+
+
+def _alive(pid: int) -> bool:
+    if os.name == "nt":  # os.kill would end the process there: the folders are left to the user
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True  # it exists (another user's)
+    return True
 
 
 def _remove_created(created: list[Path]) -> None:
