@@ -114,6 +114,9 @@ class Budget(AbstractStudyKind):
             unknown = [x for x in raw if x not in specs]
             if unknown:
                 raise ConfigError(f"[budget] sources: {unknown} are not error sources; use some of {list(specs)}")
+            repeated = sorted({x for x in raw if raw.count(x) > 1})
+            if repeated:
+                raise ConfigError(f"[budget] sources: {repeated} named more than once; name each source once")
             names = list(raw)
         else:
             names = list(specs)
