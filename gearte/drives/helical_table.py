@@ -53,13 +53,13 @@ def _num(table: Mapping, key: str, where: str) -> float:
     return float(v)
 
 
-def _whole(table: Mapping, key: str, where: str, default: int | None = None) -> int:
-    """A whole number from a parameter file (the constructors check its range); ``default`` when absent."""
+def _whole(table: Mapping, key: str, where: str, default: int | None = None, *, minimum: int = 1) -> int:
+    """A whole number ≥ `minimum` from a parameter file (the constructors check the rest); ``default`` when absent."""
     if key not in table and default is not None:
         return default
     if key not in table:
         raise ValueError(f"{where}: missing key {key!r}")
-    return as_int(f"{where}.{key}", table[key], minimum=1)
+    return as_int(f"{where}.{key}", table[key], minimum=minimum)
 
 
 def _stiffness_model(model: Mapping, where: str) -> AbstractStiffnessModel:
@@ -152,9 +152,10 @@ def read_stage_file(path: str | Path) -> StageFile:
         n_slices=_whole(model, "n_slices", mw, 8),
         stiffness_model=_stiffness_model(model, mw),
         contact_smoothing=_num(model, "contact_smoothing_um", mw) if "contact_smoothing_um" in model else 0.02,
-        n_periods=_whole(model, "n_periods", mw, 20),
-        steps_per_period=_whole(model, "steps_per_period", mw, 256),
-        samples_per_period=_whole(model, "samples_per_period", mw, 128),
+        # the solver's own bounds (`PeriodicSolver`), checked here where the study's analysis takes them as defaults
+        n_periods=_whole(model, "n_periods", mw, 20, minimum=2),
+        steps_per_period=_whole(model, "steps_per_period", mw, 256, minimum=4),
+        samples_per_period=_whole(model, "samples_per_period", mw, 128, minimum=4),
     )
 
 
