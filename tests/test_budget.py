@@ -251,6 +251,14 @@ def test_budget_example_through_gearte_run(tmp_path):
             lambda t: t.replace("[budget]\n", '[budget]\nsources = ["sun_manufacturing", "sun_manufacturing"]\n', 1),
             r"\[budget\] sources: \['sun_manufacturing'\] named more than once",
         ),
+        (  # a cost exponent whose normalisation overflows: a traceback from `gearte check` before
+            lambda t: t.replace(
+                "[budget.grades.sun_manufacturing]",
+                '[budget.costs.sun_manufacturing]\nmodel = "power"\nexponent = 300\n\n[budget.grades.sun_manufacturing]',
+                1,
+            ),
+            r"\[budget.costs.sun_manufacturing\]: Power.normalised: T_ref\^k = 13\^300 overflows",
+        ),
         # The grades' ISO ranges, checked when the file is read (the run had reported "none" for every grade).
         (
             lambda t: t.replace("module_mm = 1.0", "module_mm = 100", 1),

@@ -162,3 +162,16 @@ def test_bad_doe_tables_are_refused_naming_file_table_key_and_fix(case, tmp_path
     assert err.startswith(f"gearte: error in config: {cfg}: ") and err.count("\n") == 1, err
     assert where in err and fix in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
+
+
+def test_the_design_defaults_to_a_central_composite_design(tmp_path):
+    """docs/study-files.md gives `design` the default "ccd": a [doe] table without it reads as one."""
+    from gearte.studies.doe import CentralComposite
+
+    text = EXAMPLE.read_text(encoding="utf-8")
+    start, end = text.index("[doe.design]"), text.index("[[doe.variables]]")
+    cfg = tmp_path / "default.toml"
+    cfg.write_text(text[:start] + text[end:], encoding="utf-8")
+    study = load_study(cfg)
+    spec = study.kinds["doe"]
+    assert isinstance(spec.design, CentralComposite), spec

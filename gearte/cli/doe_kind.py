@@ -104,7 +104,7 @@ def _design(t: Table, n_vars: int, seed: int) -> AbstractDesign:
         dt = t.table("design")
         kind = dt.string("type", choices=DESIGNS)
     elif isinstance(raw, str):
-        kind = t.string("design", choices=DESIGNS)
+        kind = t.string("design", "ccd", choices=DESIGNS)  # the documented default where the key is absent
         dt = Table({}, "[doe.design]")
     else:
         raise ConfigError(f"{t.where} design: a design name ({', '.join(repr(d) for d in DESIGNS)}) or a table [doe.design], got {raw!r}")

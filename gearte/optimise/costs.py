@@ -171,7 +171,11 @@ class Power(AbstractCostModel):
         """c = (T_ref / T)^k: cost 1 at `T_ref` µm."""
         t = _coef("T_ref", T_ref, positive=True)
         kk = _coef("Power.k", k, positive=True)
-        return cls(t**kk, kk)
+        try:
+            a = t**kk
+        except OverflowError:
+            raise ValueError(f"Power.normalised: T_ref^k = {t:g}^{kk:g} overflows; shop data give exponents of about 0.5-3") from None
+        return cls(a, kk)
 
     def __call__(self, T, *, throw=True):
         return self.a * _tolerance(T, throw) ** (-self.k)
