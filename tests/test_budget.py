@@ -259,6 +259,14 @@ def test_budget_example_through_gearte_run(tmp_path):
             ),
             r"\[budget.costs.sun_manufacturing\]: Power.normalised: T_ref\^k = 13\^300 overflows",
         ),
+        (
+            lambda t: t.replace("pareto_specs = [90.0, 105.0", "pareto_specs = [90.0, inf", 1),
+            r"\[budget\] pareto_specs: expected a list of positive numbers",
+        ),
+        (
+            lambda t: t.replace('quantity = "F_r"', 'quantity = "F_beta"', 1),
+            r"\[budget.grades.sun_manufacturing\]: quantity F_beta \(total helix\) needs face_width_mm",
+        ),
         # The grades' ISO ranges, checked when the file is read (the run had reported "none" for every grade).
         (
             lambda t: t.replace("module_mm = 1.0", "module_mm = 100", 1),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import TYPE_CHECKING, Any
 
 import jax
@@ -173,6 +174,8 @@ class Budget(AbstractStudyKind):
                     "diameter": g.number("diameter_mm", positive=True),
                     "face_width": g.number("face_width_mm", positive=True) if g.has("face_width_mm") else None,
                 }
+                if grades[n]["quantity"] == "F_beta" and grades[n]["face_width"] is None:
+                    raise ConfigError(f"{g.where}: quantity F_beta (total helix) needs face_width_mm")
                 for key in ("module", "diameter", "face_width"):  # the standard's range, checked before the run
                     if grades[n][key] is not None:
                         try:
@@ -182,7 +185,9 @@ class Budget(AbstractStudyKind):
                 g.finish()
             gt.finish()
         pareto = t.get("pareto_specs", [])
-        if not isinstance(pareto, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0 for x in pareto):
+        if not isinstance(pareto, list) or not all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and 0 < x < math.inf for x in pareto
+        ):
             raise ConfigError("[budget] pareto_specs: expected a list of positive numbers (specs of the first constraint)")
         return BudgetSpec(
             constraints=tuple(constraints),
