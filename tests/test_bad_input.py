@@ -533,3 +533,21 @@ def test_a_byte_order_mark_before_the_toml_is_dropped(tmp_path, capsys):
     cfg.write_bytes(b"\xef\xbb\xbf" + RANDOM.read_bytes())
     assert cli.main(["check", str(cfg)]) == 0
     assert "OK" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("pin_circle_radius_um = 14 ", "pin_circle_radius_um = 1e300 ", "pin_circle_radius_um: 1e+300 is larger than 100,000 um"),
+        ("eccentricity_um = 20 ", "eccentricity_um = 2e5 ", "eccentricity_um: 200000 is larger than 100,000 um"),
+    ],
+    ids=["huge", "a unit mistake"],
+)
+def test_cycloid_reference_values_beyond_their_units_range(old, new, message, capsys, tmp_path):
+    """[drive.reference] reads its values itself (a number, a list or a pattern table per error source): they have
+    the same bounds as the rest of the file, 100 mm in µm."""
+    text = (ROOT / "examples" / "cycloid_yao2001_modified.toml").read_text(encoding="utf-8")
+    assert old in text
+    cfg = tmp_path / "ref.toml"
+    cfg.write_text(text.replace(old, new, 1), encoding="utf-8")
+    refused(capsys, tmp_path, "check", cfg, message=message)

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.schema import ConfigError, Table
+from ..core.schema import MAX_MICROMETRES, ConfigError, Table
 from ..core.units import ARCSEC_PER_RAD
 from .cycloid_pin_geometry import ANGLE_FIELDS, ERROR_FIELDS, PER_PIN, PER_SPACE, PROCESSES, CycloidModification
 
@@ -141,6 +141,17 @@ def _field_key(t: Table, field: str) -> str | None:
     return want if t.has(want) else None
 
 
+#: Largest size of a ``[drive.reference]`` value in each unit: 100 mm (`gearte.core.schema.MAX_MICROMETRES`), a full
+#: turn of arc seconds; phases (deg) are angles of any size.
+_LIMITS = {"um": MAX_MICROMETRES, "arcsec": 360.0 * 3600.0}
+
+
+def _in_range(t: Table, key: str, unit: str, x: float) -> None:
+    limit = _LIMITS.get(unit)
+    if limit is not None and abs(x) > limit:
+        raise ConfigError(f"{t.where} {key}: {x:g} is larger than {limit:,.0f} {unit} in size; check the unit of the key")
+
+
 def reference_errors(t: Table, counts: dict[str, int], fields: tuple[str, ...] = ERROR_FIELDS) -> tuple[dict[str, Any], dict[str, Any]]:
     """The error fields of ``[drive.reference]`` (internal units) and how they were given (for summaries).
 
@@ -161,6 +172,7 @@ def reference_errors(t: Table, counts: dict[str, int], fields: tuple[str, ...] =
             x = float(v)
             if not math.isfinite(x):
                 raise ConfigError(f"{t.where} {key}: must be finite, got {v}")
+            _in_range(t, key, unit, x)
             values[field] = x * scale
             given[key] = x
         elif isinstance(v, list):
@@ -171,6 +183,7 @@ def reference_errors(t: Table, counts: dict[str, int], fields: tuple[str, ...] =
                     f"{t.where} {key}: give {count} finite numbers (one per {'tooth space' if field in PER_SPACE else 'pin'}), "
                     f"got {len(v)} values"
                 )
+            _in_range(t, key, unit, max(v, key=abs))
             values[field] = np.asarray(v, dtype=float) * scale
             given[key] = list(map(float, v))
         elif isinstance(v, dict):
@@ -180,6 +193,7 @@ def reference_errors(t: Table, counts: dict[str, int], fields: tuple[str, ...] =
                 )
             pt = Table(v, f"{t.where} {key}")
             amp = pt.number(f"amplitude_{unit}")
+            _in_range(t, f"{key} amplitude_{unit}", unit, amp)
             phase = math.radians(pt.number("phase_deg", 0.0))
             order = pt.integer("order", 1, minimum=1)
             pt.finish()
