@@ -634,6 +634,24 @@ def test_the_bearing_polygon_is_an_option_of_the_drive_and_its_study_file(tmp_pa
     path = tmp_path / "rv.toml"
     path.write_text(head + sep + tail.replace("\n", "\nbearing_faces = 128\n", 1))
     assert load_study(path).drive.bearing_faces == 128
+    # In the study file the bounds are named with the file's table and key.
+    from gearte.core.schema import ConfigError
+
+    for new, message in (
+        (head + sep + tail.replace("\n", "\nbearing_faces = 100000\n", 1), r"\[drive.model\] bearing_faces: must be ≤ 4096, got 100000"),
+        (
+            text.replace("deflection_mm = 1e-10 ", "deflection_mm = 10 ", 1),
+            r"\[drive.model\] deflection_mm: 10 mm is outside 1e-13 … 1e-05 mm",
+        ),
+        (
+            text.replace("pressure_angle_deg = 20.0 ", "pressure_angle_deg = 50 ", 1),
+            r"\[drive\] pressure_angle_deg: 50° is not a gear pressure angle",
+        ),
+    ):
+        assert new != text
+        path.write_text(new)
+        with pytest.raises(ConfigError, match=message):
+            load_study(path)
 
 
 def test_the_regularisation_follows_the_small_load_unless_given(tmp_path):

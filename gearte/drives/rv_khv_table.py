@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..core.schema import Table
+from ..core.schema import ConfigError, Table
 from ..core.units import ARCSEC_PER_RAD
 from .cycloid_pin_geometry import CycloidModification
 from .rv_khv_contacts import DEFLECTION_MM
@@ -37,6 +37,8 @@ def drive_arguments(t: Table) -> dict[str, Any]:
         discs=t.integer("discs", 2, minimum=1),
         pressure_angle=math.radians(t.number("pressure_angle_deg", 20.0, positive=True)),
     )
+    if not kw["pressure_angle"] < math.radians(45.0):
+        raise ConfigError(f"{t.where} pressure_angle_deg: {math.degrees(kw['pressure_angle']):g}° is not a gear pressure angle (below 45°)")
     for key in ("backlash", "crank_disc_clearance", "crank_carrier_clearance", "main_bearing_clearance"):
         kw[f"{key}_mm"] = 1e-3 * t.number(f"{key}_um", 0.0, minimum=0)
     if t.has("modification"):
@@ -53,11 +55,19 @@ def drive_arguments(t: Table) -> dict[str, Any]:
         g.finish()
     if t.has("model"):
         m = t.table("model")
+        from .rv_khv import DEFLECTION_RANGE_MM, MAX_BEARING_FACES  # (rv_khv reads this module when it reads a table)
+
         kw["deflection_mm"] = m.number("deflection_mm", DEFLECTION_MM, positive=True)
+        lo, hi = DEFLECTION_RANGE_MM
+        if not lo <= kw["deflection_mm"] <= hi:
+            raise ConfigError(
+                f"{m.where} deflection_mm: {kw['deflection_mm']:g} mm is outside {lo:g} … {hi:g} mm; the rigid limit needs a "
+                f"small load (default {DEFLECTION_MM:g} mm, docs/rv.md, 'Size of the small load')"
+            )
         for key in ("pin_stiffness", "mesh_stiffness", "bearing_stiffness"):
             kw[key] = m.number(key, 1.0, positive=True)
         if m.has("bearing_faces"):
-            kw["bearing_faces"] = m.integer("bearing_faces", minimum=8)
+            kw["bearing_faces"] = m.integer("bearing_faces", minimum=8, maximum=MAX_BEARING_FACES)
         m.finish()
     return kw
 
