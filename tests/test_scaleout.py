@@ -233,6 +233,12 @@ def test_a_streamed_run_reports_exact_moments_and_bounded_percentiles(single_run
     np.testing.assert_array_equal(np.load(out / "samples_te.npy"), np.load(single_run / "samples.npz")["te"])
     assert "Streamed study" in (out / "report.md").read_text()
     assert s["typical_sample"]["index"] == held["typical_sample"]["index"]
+    # `gearte compare` reads the kept values; without them it says how to keep them.
+    assert main(["compare", str(out), str(single_run), "--out", str(tmp_path / "cmp")]) == 0
+    c = json.loads((tmp_path / "cmp" / "comparison.json").read_text())
+    assert [r["n"] for r in c["runs"]] == [3000, 3000] and c["runs"][0]["mean"] == c["runs"][1]["mean"]
+    (out / "samples_te.npy").unlink()
+    assert main(["compare", str(out), str(single_run), "--out", str(tmp_path / "cmp2")]) == 2
 
 
 @pytest.mark.parametrize("streamed", [False, True])

@@ -90,6 +90,14 @@ def read_run(folder: str | Path) -> tuple[dict, np.ndarray, np.ndarray | None]:
         _field(summary, f, sj)
     npz = d / "samples.npz"
     if not npz.is_file():
+        if "streamed" in summary:
+            kept = d / "samples_te.npy"  # a streamed run's values, written chunk by chunk with --keep-samples
+            if kept.is_file():
+                return summary, _kept_samples(kept, summary["te"]["n"]), None
+            raise RunFolderError(
+                f"{d}: a streamed run (statistics accumulated chunk by chunk) without its samples; run it with "
+                "--keep-samples to compare it (its statistics are in its summary.json and report.md)"
+            )
         raise RunFolderError(f"{d}: not a finished gearte run (no samples.npz); run `gearte run` first")
     damaged = f"{npz}: cannot be read as a NumPy .npz archive of numbers; the file is damaged (run the study again)"
     try:
@@ -115,6 +123,20 @@ def read_run(folder: str | Path) -> tuple[dict, np.ndarray, np.ndarray | None]:
                 f"{npz}: `{name}` must hold {n:,} finite numbers (te.n of summary.json), got {arr.dtype} of shape {arr.shape}"
             )
     return summary, te.astype(float), None if te_rad is None else te_rad.astype(float)
+
+
+def _kept_samples(path: Path, n: int) -> np.ndarray:
+    """The TE of every sample of a streamed run kept with --keep-samples (``samples_te.npy``, the study's unit)."""
+    try:
+        te = np.load(path, mmap_mode="r", allow_pickle=False)
+    except (OSError, ValueError, EOFError):
+        raise RunFolderError(f"{path}: cannot be read as a NumPy .npy array; the file is damaged (run the study again)") from None
+    if te.dtype.kind not in "fiu" or te.shape != (n,):
+        raise RunFolderError(f"{path}: must hold {n:,} numbers (te.n of summary.json), got {te.dtype} of shape {te.shape}")
+    values = np.asarray(te, dtype=float)
+    if not np.all(np.isfinite(values)):
+        raise RunFolderError(f"{path}: holds values that are not finite; the file is damaged (run the study again)")
+    return values
 
 
 def compare_runs(run_dirs: list[str | Path], out: str | Path) -> dict:
