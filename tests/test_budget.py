@@ -247,6 +247,7 @@ def test_budget_example_through_gearte_run(tmp_path):
             r"\[errors.sun_manufacturing.magnitude\] truncate_at_tolerance: the tolerance is 0",
         ),
         (lambda t: t.replace("maximum_factor = 10.0", "maximum_factor = 0.5"), "maximum_factor"),
+        (lambda t: t.replace("maximum_factor = 10.0", "maximum_factor = 1e12"), r"\[budget\] maximum_factor: 1e\+12 is more than 1000"),
         (
             lambda t: t.replace("[budget]\n", '[budget]\nsources = ["sun_manufacturing", "sun_manufacturing"]\n', 1),
             r"\[budget\] sources: \['sun_manufacturing'\] named more than once",

@@ -62,6 +62,10 @@ class BudgetSpec:
         return self.constraints[0].spec
 
 
+#: Largest `maximum_factor` of a budget: its tolerances stay within this many times the nominal ones.
+MAX_TOLERANCE_FACTOR = 1000.0
+
+
 def _cost_model(t: Table, nominal: float):
     """A cost model from its table; without coefficients, normalised to cost 1 at the nominal tolerance."""
     kind = t.string("model", choices=COST_MODELS)
@@ -159,6 +163,11 @@ class Budget(AbstractStudyKind):
         factor = t.number("maximum_factor", 10.0, positive=True)
         if factor <= 1:
             raise ConfigError(f"[budget] maximum_factor: must be > 1 (largest tolerance = factor × nominal), got {factor:g}")
+        if factor > MAX_TOLERANCE_FACTOR:
+            raise ConfigError(
+                f"[budget] maximum_factor: {factor:g} is more than {MAX_TOLERANCE_FACTOR:g} (largest tolerance = factor × "
+                "nominal: a budget searches within a few times the nominal tolerances)"
+            )
         grades = {}
         if t.has("grades"):
             gt = t.table("grades")
