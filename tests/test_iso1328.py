@@ -330,6 +330,15 @@ def test_cli_grade_invalid_input(args, match, capsys):
     assert "gearte: error:" in err and match in err
 
 
+@pytest.mark.parametrize("value", ["1_0", "\uff11", "2mm"])
+def test_cli_grade_lengths_in_ascii_decimals_only(value, capsys):
+    """Python's float reads 1_0 as 10 and full-width digits as digits: a length option takes ASCII decimals only."""
+    with pytest.raises(SystemExit) as e:
+        cli.main(["grade", "--standard", S2013, "--module", value, "--diameter", "50", "--grade", "5"])
+    assert e.value.code == 2
+    assert f"argument --module: expected a number of mm, got {value!r}" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     "args",
     [

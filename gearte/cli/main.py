@@ -80,6 +80,14 @@ def _whole(text: str) -> int:
     return int(text)
 
 
+def _length_mm(text: str) -> float:
+    """A length in mm written as an ASCII decimal number (Python's `float` also takes `1_0` and other scripts' digits)."""
+    number = r"([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?|nan|inf|infinity"  # nan and inf: the check below names them
+    if not re.fullmatch(rf"\s*[+-]?({number})\s*", text, flags=re.IGNORECASE):
+        raise argparse.ArgumentTypeError(f"expected a number of mm, got {text!r}")
+    return float(text)
+
+
 def _positive_int(text: str) -> int:
     v = _whole(text)
     if v < 1:
@@ -195,9 +203,9 @@ def _parser() -> argparse.ArgumentParser:
         choices=["1328-1:2013", "1328-1:1995"],
         help="ISO 1328-1:2013 (classes 1-11) or ISO 1328-1:1995/-2:1997 = GB/T 10095 (grades 0-12)",
     )
-    g.add_argument("--module", required=True, type=float, help="normal module m, mm")
-    g.add_argument("--diameter", required=True, type=float, help="reference diameter d, mm")
-    g.add_argument("--face-width", type=float, help="face width b, mm (needed for F_beta; F_beta is null without it)")
+    g.add_argument("--module", required=True, type=_length_mm, help="normal module m, mm")
+    g.add_argument("--diameter", required=True, type=_length_mm, help="reference diameter d, mm")
+    g.add_argument("--face-width", type=_length_mm, help="face width b, mm (needed for F_beta; F_beta is null without it)")
     g.add_argument("--teeth", type=_whole, help="number of teeth z (optional; range-checked only)")
     g.add_argument("--grade", required=True, type=_whole, help="whole accuracy grade")
     _identify_parsers(sub)
