@@ -268,6 +268,14 @@ def test_budget_example_through_gearte_run(tmp_path):
             lambda t: t.replace('quantity = "F_r"', 'quantity = "F_beta"', 1),
             r"\[budget.grades.sun_manufacturing\]: quantity F_beta \(total helix\) needs face_width_mm",
         ),
+        (  # coefficients whose cost at the nominal tolerance is 0 (13^-1e300 underflows) or inf: reported as results before
+            lambda t: t.replace(
+                "[budget.grades.sun_manufacturing]",
+                '[budget.costs.sun_manufacturing]\nmodel = "power"\na = 1e300\nk = 1e300\n\n[budget.grades.sun_manufacturing]',
+                1,
+            ),
+            r"\[budget.costs.sun_manufacturing\]: the cost at the nominal tolerance \(13\) is 0;",
+        ),
         # The grades' ISO ranges, checked when the file is read (the run had reported "none" for every grade).
         (
             lambda t: t.replace("module_mm = 1.0", "module_mm = 100", 1),

@@ -87,7 +87,14 @@ def _cost_model(t: Table, nominal: float):
             if cls is Power:
                 return Power.normalised(nominal, k=t.number("exponent", 1.0, positive=True))
             return cls.normalised(nominal)  # pyright: ignore[reportAttributeAccessIssue]
-        return cls(*[t.number(k) for k in params])  # pyright: ignore[reportCallIssue]
+        model = cls(*[t.number(k) for k in params])  # pyright: ignore[reportCallIssue]
+        at_nominal = float(model(nominal))
+        if not (math.isfinite(at_nominal) and at_nominal > 0):
+            raise ConfigError(
+                f"{t.where}: the cost at the nominal tolerance ({nominal:g}) is {at_nominal:g}; give coefficients for which "
+                "it is a positive finite number"
+            )
+        return model
     except ValueError as e:
         if isinstance(e, ConfigError):
             raise
