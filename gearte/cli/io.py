@@ -292,16 +292,21 @@ def atomic_output_dir(path: str | Path, *, inputs: Iterable[str | Path] = (), op
         raise
 
 
+def _host() -> str:
+    """This host's name as the working folders carry it (no dashes: a dash ends the name there)."""
+    return socket.gethostname().replace("-", "_")
+
+
 def _owner() -> str:
     """This process, as the working folders beside a results folder name it: ``PID@HOST``."""
-    return f"{os.getpid()}@{socket.gethostname().replace('-', '_')}"
+    return f"{os.getpid()}@{_host()}"
 
 
 def _clear_stale(path: Path) -> None:
     """Remove the working folders a killed run (SIGKILL, a power cut) left beside `path`: its new results
     (``.NAME.partial-PID@HOST-…``) and, where it had moved the previous result aside (``.NAME.old-PID@HOST-…``), that
     result is put back if `path` is missing, else removed. Only folders of this host whose process is gone."""
-    host = socket.gethostname().replace("-", "_")
+    host = _host()
     for kind in ("old", "partial"):  # the previous result first: it may be put back
         for p in sorted(path.parent.glob(f".{path.name}.{kind}-*@{host}-*")):
             pid = p.name[len(f".{path.name}.{kind}-") :].partition("@")[0]

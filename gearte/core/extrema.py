@@ -313,12 +313,11 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     # candidate, not scattered into the (rows × blocks) arrays: the blocks reopened are merged into them only for
     # the rows a later round takes.
     reopen = rest + margin[:, None] > val[:, None]
-    rank = rest
 
     def uncertified(state):
         remaining, _, best_val, reopen = state
         blocks = jnp.max(jnp.where(remaining, top, -jnp.inf), axis=-1).astype(best_val.dtype)
-        again = jnp.max(jnp.where(reopen, rank, -jnp.inf), axis=-1)
+        again = jnp.max(jnp.where(reopen, rest, -jnp.inf), axis=-1)
         return jnp.maximum(blocks, again) + margin > best_val
 
     state = (~taken, tau, val, reopen)
@@ -334,7 +333,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         # The picked rows' reopened blocks join their unrefined ones, ranked by their second hump (or their value).
         sub = jnp.arange(few)[:, None]
         rem_p = remaining[safe].at[sub, sel[safe]].max(reopen[safe])
-        top_p = top[safe].at[sub, sel[safe]].set(jnp.where(reopen[safe], rank[safe].astype(top.dtype), top[safe][sub, sel[safe]]))
+        top_p = top[safe].at[sub, sel[safe]].set(jnp.where(reopen[safe], rest[safe].astype(top.dtype), top[safe][sub, sel[safe]]))
         taken, t_new, v_new, _, _ = refine(rem_p, top_p, a2[safe], b2[safe], off2[safe], multi=True)
         better = v_new > best_val[safe]
         remaining = remaining.at[pick].set(rem_p & ~taken, mode="drop")

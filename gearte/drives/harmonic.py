@@ -566,9 +566,6 @@ def _run_settings(t: Table) -> HarmonicRunSettings | None:
         if not isinstance(adj, list) or not all(isinstance(x, str) for x in adj) or not adj:
             raise ConfigError(f'{asm.where} adjustable: expected a list of source names, e.g. ["cs_bore_runout"]')
         adjustable = tuple(adj)
-        repeated = sorted({x for x in adj if adj.count(x) > 1})
-        if repeated:
-            raise ConfigError(f"{asm.where} adjustable: {repeated} named more than once; name each source once")
         starts = asm.integer("starts", 32, minimum=1)
         asm.finish()
     try:
@@ -583,6 +580,8 @@ def _run_settings(t: Table) -> HarmonicRunSettings | None:
     except ValueError as e:
         if isinstance(e, ConfigError):
             raise
+        if asm is not None and str(e).startswith("adjustable:"):  # the key's own table
+            raise ConfigError(f"{asm.where} {e}") from None
         raise ConfigError(f"{rec.where}: {e}") from None
     rec.finish()
     return settings

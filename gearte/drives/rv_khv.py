@@ -61,8 +61,8 @@ from ..core.validate import as_float, as_int
 from .cycloid_pin import CycloidPin
 from .cycloid_pin_geometry import CycloidModification
 from .protocol import AbstractGridDrive, AbstractStudyContext, Eccentricity, SourceSpec, StudyOutputs, Trace
-from .rv_khv_contacts import DEFLECTION_MM, REGULARISATION_PER_MM, dof_count, output_index, rv_system, translations
-from .rv_khv_equilibrium import BEARING_FACES, solve
+from .rv_khv_contacts import DEFLECTION_MM, REGULARISATION_PER_MM, check_deflection, dof_count, output_index, rv_system, translations
+from .rv_khv_equilibrium import BEARING_FACES, MAX_BEARING_FACES, solve
 
 if TYPE_CHECKING:
     from ..core.schema import Table
@@ -171,13 +171,6 @@ SOURCES = {
 }
 
 
-#: The small load's deflection scales `RVKHV` accepts (mm): the rigid limit holds between about 1e-11 and 1e-8 mm on
-#: the examples (docs/rv.md, "Size of the small load"); beyond this range its results are the loaded TE or rounding.
-DEFLECTION_RANGE_MM = (1e-13, 1e-5)
-#: Most faces of a bearing's clearance polygon (1,024 is the accuracy benchmark's reference).
-MAX_BEARING_FACES = 4096
-
-
 class RVKHV(AbstractGridDrive):
     """A two-stage RV (K-H-V) reducer (Hidaka et al. 1994); see the module notes for the model.
 
@@ -196,7 +189,7 @@ class RVKHV(AbstractGridDrive):
     - `points`: output angles of the grid over one output revolution (default 360).
     - `trace_points`: output angles of the report's TE curve (default 2 × `points`).
     - `deflection_mm`: the elastic deflection scale of the small load (default 1e-10 mm; 1e-13 to 1e-5 mm accepted,
-      `DEFLECTION_RANGE_MM`). The rigid-limit results
+      `rv_khv_contacts.DEFLECTION_RANGE_MM`). The rigid-limit results
       do not depend on it inside a window: it must be small enough that the load does not move the weak modes of
       preloaded parts (about 1e-5 of the pin stiffness) across a change of contact state, and large enough for the
       Newton iteration to resolve it against the preload's forces (docs/rv.md, "Size of the small load").
@@ -205,8 +198,9 @@ class RVKHV(AbstractGridDrive):
       default load). Tied to the load, its force μ |q − q₀| stays the same small fraction of the load whatever the
       load's size.
     - `bearing_faces`: faces of the polygon that stands for every bearing's clearance circle (default 64; at
-      least 8, at most `MAX_BEARING_FACES`). On the tolerance example the 64-gon's TE is within 0.025″ of 1,024 faces at the median solve and
-      0.15″ at the 99th percentile; 128 faces give 0.006″ and 0.10″ for half again as many Newton iterations
+      least 8, at most `rv_khv_equilibrium.MAX_BEARING_FACES`). On the tolerance example the 64-gon's TE is within
+      0.025″ of 1,024 faces at the median solve and 0.15″ at the 99th percentile; 128 faces give 0.006″ and 0.10″
+      for half again as many Newton iterations
       (docs/rv.md, "Equilibrium").
     """
 
@@ -293,13 +287,7 @@ class RVKHV(AbstractGridDrive):
             setattr(self, name, jnp.asarray(as_float(name, v, nonnegative=True, hint="a clearance is ≥ 0 mm"), dtype=float))
         self.points = as_int("points", points, minimum=1)
         self.trace_points = 2 * self.points if trace_points is None else as_int("trace_points", trace_points, minimum=2)
-        deflection = as_float("deflection_mm", deflection_mm, positive=True)
-        if not DEFLECTION_RANGE_MM[0] <= deflection <= DEFLECTION_RANGE_MM[1]:
-            raise ValueError(
-                f"deflection_mm: {deflection:g} mm is outside {DEFLECTION_RANGE_MM[0]:g} … {DEFLECTION_RANGE_MM[1]:g} mm; the "
-                f"rigid limit needs a small load (default {DEFLECTION_MM:g} mm, docs/rv.md, 'Size of the small load')"
-            )
-        self.deflection_mm = jnp.asarray(deflection, dtype=float)
+        self.deflection_mm = jnp.asarray(check_deflection(as_float("deflection_mm", deflection_mm, positive=True)), dtype=float)
         for name, v in (("pin_stiffness", pin_stiffness), ("mesh_stiffness", mesh_stiffness), ("bearing_stiffness", bearing_stiffness)):
             setattr(self, name, jnp.asarray(as_float(name, v, positive=True), dtype=float))
         if regularisation is None:

@@ -55,6 +55,21 @@ DEFLECTION_MM = 1e-10
 #: The default regularisation μ / k_pin per mm of `deflection_mm`: its force μ |q − q₀| is then 1e-3 × |q − q₀| / mm times
 #: the load's, whatever the load.
 REGULARISATION_PER_MM = 1e-3
+#: The small load's deflection scales accepted (mm): the rigid limit holds between about 1e-11 and 1e-8 mm on the
+#: examples (docs/rv.md, "Size of the small load"); beyond this range the results are the loaded TE or rounding.
+DEFLECTION_RANGE_MM = (1e-13, 1e-5)
+
+
+def check_deflection(value: float) -> float:
+    """`value` (mm) inside `DEFLECTION_RANGE_MM`; ValueError naming ``deflection_mm`` otherwise."""
+    lo, hi = DEFLECTION_RANGE_MM
+    if not lo <= value <= hi:
+        raise ValueError(
+            f"deflection_mm: {value:g} mm is outside {lo:g} … {hi:g} mm; the rigid limit needs a small load (default "
+            f"{DEFLECTION_MM:g} mm, docs/rv.md, 'Size of the small load')"
+        )
+    return value
+
 
 UM = MM_PER_UM
 #: Pins with a lever arm shorter than this fraction of the disc's longest take their normal clearance as the gap.
@@ -262,8 +277,10 @@ def output_index(drive: RVKHV) -> int:
 
 __all__ = (
     "DEFLECTION_MM",
+    "DEFLECTION_RANGE_MM",
     "REGULARISATION_PER_MM",
     "SHORT_LEVER",
+    "check_deflection",
     "cycloid_errors",
     "dof_count",
     "output_index",

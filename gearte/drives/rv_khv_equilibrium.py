@@ -65,6 +65,8 @@ from ..core.solution import RESULTS
 
 #: Faces of the polygon that stands for a bearing's clearance circle, by default (`ContactSystem.faces`).
 BEARING_FACES = 64
+#: Most faces of a clearance polygon a drive accepts (1,024 is the accuracy benchmark's reference).
+MAX_BEARING_FACES = 4096
 #: Largest number of Newton iterations; a solve that needs more reports `RESULTS.nonlinear_max_steps_reached`. Units
 #: with errors far below their clearances are the slow ones: their contacts close one per iteration, 130-260
 #: iterations on 64 units of the budget example at 1e-3 to 1e-1 of its nominal tolerances (77 and 42 of their 1,152
@@ -473,4 +475,14 @@ def solve(s: ContactSystem, q0: Float[Array, " n"] | None = None) -> Equilibrium
     return Equilibrium(q, q_rigid, force, bforce, result, steps)
 
 
-__all__ = ("BEARING_FACES", "ContactSystem", "Equilibrium", "face_normals", "gradient", "hessian", "potential", "solve")
+__all__ = (
+    "BEARING_FACES",
+    "MAX_BEARING_FACES",
+    "ContactSystem",
+    "Equilibrium",
+    "face_normals",
+    "gradient",
+    "hessian",
+    "potential",
+    "solve",
+)

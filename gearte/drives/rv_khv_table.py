@@ -20,7 +20,8 @@ from typing import Any
 from ..core.schema import ConfigError, Table
 from ..core.units import ARCSEC_PER_RAD
 from .cycloid_pin_geometry import CycloidModification
-from .rv_khv_contacts import DEFLECTION_MM
+from .rv_khv_contacts import DEFLECTION_MM, check_deflection
+from .rv_khv_equilibrium import MAX_BEARING_FACES
 
 
 def drive_arguments(t: Table) -> dict[str, Any]:
@@ -55,15 +56,12 @@ def drive_arguments(t: Table) -> dict[str, Any]:
         g.finish()
     if t.has("model"):
         m = t.table("model")
-        from .rv_khv import DEFLECTION_RANGE_MM, MAX_BEARING_FACES  # (rv_khv reads this module when it reads a table)
-
-        kw["deflection_mm"] = m.number("deflection_mm", DEFLECTION_MM, positive=True)
-        lo, hi = DEFLECTION_RANGE_MM
-        if not lo <= kw["deflection_mm"] <= hi:
-            raise ConfigError(
-                f"{m.where} deflection_mm: {kw['deflection_mm']:g} mm is outside {lo:g} … {hi:g} mm; the rigid limit needs a "
-                f"small load (default {DEFLECTION_MM:g} mm, docs/rv.md, 'Size of the small load')"
-            )
+        try:  # checked here, so that the message names [drive.model]
+            kw["deflection_mm"] = check_deflection(m.number("deflection_mm", DEFLECTION_MM, positive=True))
+        except ValueError as e:
+            if isinstance(e, ConfigError):
+                raise
+            raise ConfigError(f"{m.where} {e}") from None
         for key in ("pin_stiffness", "mesh_stiffness", "bearing_stiffness"):
             kw[key] = m.number(key, 1.0, positive=True)
         if m.has("bearing_faces"):

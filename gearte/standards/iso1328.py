@@ -74,11 +74,6 @@ def _quantity(quantity: str) -> str:
 def check_length(name: str, value, standard: str) -> float:
     """`value` (mm) as a finite length within the range of ISO `standard` for `name` (``"module"``, ``"diameter"``
     or ``"face_width"``); ValueError naming it and the range otherwise."""
-    return _length(name, value, standard)
-
-
-def _length(name: str, value, standard: str) -> float:
-    """A finite length in mm within the standard's range."""
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -102,7 +97,7 @@ def _range_mean(name: str, v: float) -> float:
     for lo, hi in zip(limits[:-1], limits[1:]):
         if v <= hi:
             return math.sqrt(lo * hi)
-    raise AssertionError("unreachable: range checked by _length")
+    raise AssertionError("unreachable: range checked by check_length")
 
 
 def _teeth(teeth, standard: str) -> None:
@@ -147,9 +142,9 @@ def _grade5(quantity: str, standard: str, module, diameter, face_width, teeth) -
     """Validated, unrounded grade-5 value (µm) of one quantity."""
     standard = check_standard(standard)
     quantity = _quantity(quantity)
-    m = _length("module", module, standard)
-    d = _length("diameter", diameter, standard)
-    b = None if face_width is None else _length("face_width", face_width, standard)
+    m = check_length("module", module, standard)
+    d = check_length("diameter", diameter, standard)
+    b = None if face_width is None else check_length("face_width", face_width, standard)
     _teeth(teeth, standard)
     if quantity == "F_beta" and b is None:
         raise ValueError("F_beta (total helix tolerance) needs the face width: pass face_width (mm)")
