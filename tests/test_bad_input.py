@@ -390,6 +390,33 @@ def test_estimate_and_yes(capsys, tmp_path, monkeypatch):
     assert "--samples 200: about" in capsys.readouterr().err
 
 
+def test_a_slow_drive_is_timed_from_fewer_samples(capsys, tmp_path, monkeypatch):
+    """An RV study of a few thousand units runs for an hour: it is timed before it starts, from 100 times the
+    samples the timing takes (two blocks), not from the million samples of a closed-form drive."""
+    rv = ROOT / "examples" / "rv_robot_joint_tolerances.toml"
+    study = load_study(rv)
+    threshold = run_mod.timing_threshold(study)
+    assert threshold == run_mod.MEASURE_FACTOR * run_mod.measured_samples(study) < study.samples
+    assert run_mod.timing_threshold(load_study(RANDOM)) == min(run_mod.MEASURE_ABOVE, 100 * run_mod.measured_samples(load_study(RANDOM)))
+    asked = []
+
+    def hour(study, *, measure_above):
+        asked.append((study.samples, measure_above))
+        return run_mod.Cost(study.samples, 0, 3600.0, study.samples / 3600.0)
+
+    def ran(*a, **k):
+        raise AssertionError("ran")
+
+    monkeypatch.setattr(run_mod, "_run", ran)
+    monkeypatch.setattr(main_mod, "estimate_cost", hour)
+    refused(capsys, tmp_path, "run", rv, "--out", tmp_path / "o", "--samples", threshold + 1, message="about 60 min", computing=True)
+    assert asked == [(threshold + 1, threshold)]
+    # At the threshold nothing is timed: the run starts at once (here stopped where it would compute).
+    with pytest.raises(AssertionError, match="ran"):
+        cli.main(["run", str(rv), "--out", str(tmp_path / "o"), "--samples", str(threshold), "--no-progress"])
+    assert len(asked) == 1
+
+
 # ---------------------------------------------------------------- compare
 
 

@@ -38,6 +38,7 @@ _LAZY = {
     "CONFIRM_BYTES": ".run",
     "CONFIRM_SECONDS": ".run",
     "estimate_cost": ".run",
+    "timing_threshold": ".run",
     "run_study": ".run",
     "compare_runs": ".compare",
     "load_study": ".config",
@@ -135,9 +136,10 @@ def _duration(s: float) -> str:
 
 def _confirm(args, study: Study) -> None:
     """Estimate a large run before starting it; refuse one above the thresholds without --yes."""
-    if study.samples <= _import(".run").MEASURE_ABOVE:
+    threshold = _lazy("timing_threshold")(study)
+    if study.samples <= threshold:
         return  # small enough to start at once (and not worth tracing the study twice)
-    cost = _lazy("estimate_cost")(study)
+    cost = _lazy("estimate_cost")(study, measure_above=threshold)
     if cost.seconds is None:
         return
     where = f"--samples {study.samples:,}" if args.samples is not None else f"{args.config}: [study] samples = {study.samples:,}"

@@ -127,8 +127,10 @@ def _draw(figure: Figure, folder: Path) -> None:
     fn(**figure.data, path=folder / figure.filename)
 
 
-#: Samples above which `gearte run` times the study before starting it (`estimate_cost`).
+#: Samples above which `gearte run` times the study before starting it (`estimate_cost`), whatever the drive; a slow
+#: drive's study (an equilibrium or an ODE per sample) is timed from `MEASURE_FACTOR` times the samples it times.
 MEASURE_ABOVE = 1_000_000
+MEASURE_FACTOR = 100
 #: Estimated Monte Carlo time (s) and per-sample results (bytes) above which `gearte run` asks for --yes.
 CONFIRM_SECONDS = 15 * 60
 CONFIRM_BYTES = 2 * 2**30
@@ -165,18 +167,32 @@ def _phases_to_choose_held(study: Study) -> Study:
     return dataclasses.replace(study, errors=ErrorModel(held, study.errors.specs))
 
 
+def measured_samples(study: Study) -> int:
+    """The samples `estimate_cost` times: two blocks (the Monte Carlo's compiled call, `default_block_size`)."""
+    return 2 * default_block_size(_sampler(study).bytes_per_sample())
+
+
+def timing_threshold(study: Study) -> int:
+    """Samples above which `gearte run` times `study` before starting it: `MEASURE_ABOVE`, or `MEASURE_FACTOR`
+    times the samples it times if fewer (a drive of large blocks is fast per sample; one of small blocks, such as
+    the RV reducer's equilibria, is slow, and an hour's run of it may hold a few thousand units). The timing then
+    costs at most about 1/`MEASURE_FACTOR` of the run, and its compilation is the run's own."""
+    return min(MEASURE_ABOVE, MEASURE_FACTOR * measured_samples(study))
+
+
 def estimate_cost(study: Study, *, measure_above: int | None = None) -> Cost:
     """Estimate the study's own Monte Carlo (study kinds not included): the per-sample results' size from their
-    shapes, and, above `measure_above` samples, its time from a timed compiled call of two blocks of samples
-    (after a first call that compiles it; a few seconds, more for a grid drive)."""
+    shapes, and, above `measure_above` samples (default: `timing_threshold`), its time from a timed
+    compiled call of two blocks of samples (after a first call that compiles it; a few seconds, more for a grid
+    drive)."""
     fn = _sampler(_phases_to_choose_held(study))
     shapes = jax.eval_shape(fn, as_key(0))
     per = 3 * 8 + sum(int(np.prod(x.shape)) * x.dtype.itemsize for x in jax.tree.leaves(shapes[1]))  # te, te_rad, index
     nbytes = 0 if _streams(study) else per * study.samples
-    if study.samples <= (MEASURE_ABOVE if measure_above is None else measure_above):
+    if study.samples <= (timing_threshold(study) if measure_above is None else measure_above):
         return Cost(study.samples, nbytes)
     # The smallest compiled call (two blocks), run twice: the second is timed.
-    n = 2 * default_block_size(fn.bytes_per_sample())
+    n = measured_samples(study)
     monte_carlo(fn, key=study.seed, n_samples=n, chunk_size=n, progress=False)
     t0 = time.perf_counter()
     monte_carlo(fn, key=study.seed, n_samples=n, chunk_size=n, progress=False)
