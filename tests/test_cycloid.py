@@ -323,6 +323,13 @@ def test_gradients_have_no_nans_for_pins_that_never_touch():
         (dict(z_pins=26.5, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0), "z_pins"),
         (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_radius=23.0), "undercut"),
         (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_circle_radius=150.0), "K = a z_b / R_Z"),
+        # A wheel far from the pin circle (R_Z 12 mm or more away: the teeth's depth 2a) would grind away every tooth.
+        (
+            dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_circle_radius=207.0),
+            "shift: \\+12 mm is not below",
+        ),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_circle_radius=1e9), "teeth's depth"),
+        (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, wheel_pin_radius=1.5), "equidistant: -12 mm"),
         (dict(z_pins=26, pin_circle_radius=195.0, pin_radius=13.5, eccentricity=6.0, analysis=CycloidAnalysis), "analysis"),
     ],
 )

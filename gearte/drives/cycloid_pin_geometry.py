@@ -130,6 +130,14 @@ def check_modification(drive: CycloidPin) -> None:
             f"modification.rotation: {rot:g} rad is not a small rotation; it must be below a quarter of a "
             f"tooth space, π/(2 z_a) = {math.pi / (2 * (zb - 1)):.6g} rad"
         )
+    # A modification opens a clearance of at most |ΔR_Z| + |Δr_Z| along the normal; one as deep as the teeth (2a) leaves
+    # the disc without a tooth that any pin could touch (modifications are tenths of a millimetre).
+    for name, v in (("shift", RZ - R), ("equidistant", rZ - float(drive.pin_radius))):
+        if not abs(v) < 2 * a:
+            raise ValueError(
+                f"modification.{name}: {v:+g} mm is not below the teeth's depth, twice the eccentricity (2a = {2 * a:g} mm): "
+                "no pin would touch the disc; a profile modification is a fraction of a millimetre"
+            )
 
 
 class CycloidErrors(eqx.Module):
