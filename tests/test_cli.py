@@ -39,16 +39,26 @@ def test_importing_gearte_changes_no_global_state():
 
 
 def test_library_entry_points_refuse_float32_clearly():
+    """Without JAX's 64-bit mode every entry point refuses with the fix, none computes in float32: the Monte Carlo,
+    a drive's signal (the README's first steps), and the exact peaks of a signal built before x64 was turned off."""
     code = (
-        "import gearte, jax.numpy as jnp; from gearte.drives import wang2013\n"
+        "import gearte, jax, jax.numpy as jnp; from gearte.drives import wang2013\n"
         "d = wang2013.table1_drive(); m = gearte.ErrorModel({n: gearte.ErrorSource(gearte.Fixed(t), gearte.UniformPhase()) "
         "for n, t in wang2013.TABLE1_TOLERANCES_UM.items()}, d.error_sources)\n"
-        "try:\n    gearte.monte_carlo(gearte.TEStudy(d, m), key=1, n_samples=8)\nexcept RuntimeError as e:\n    print(e)"
+        "errors = d.zero_errors()\n"
+        "jax.config.update('jax_enable_x64', True); sig = d.signal(errors); jax.config.update('jax_enable_x64', False)\n"
+        "calls = {'monte_carlo': lambda: gearte.monte_carlo(gearte.TEStudy(d, m), key=1, n_samples=8),\n"
+        "    'signal': lambda: d.signal(errors), 'peak': lambda: gearte.peak(sig), 'extrema': lambda: gearte.extrema(sig),\n"
+        "    'smooth_peak': lambda: gearte.smooth_peak(sig, width=1e-6), 'evaluate': lambda: gearte.evaluate(sig, 0.0)}\n"
+        "for name, call in calls.items():\n"
+        "    try:\n        print(name, 'computed', call())\n    except RuntimeError as e:\n"
+        "        print(name, 'refused' if 'jax_enable_x64' in str(e) else e)"
     )
     env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
     env["PYTHONPATH"] = str(ROOT)
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
-    assert p.returncode == 0 and "jax_enable_x64" in p.stdout, p.stdout + p.stderr
+    names = ("monte_carlo", "signal", "peak", "extrema", "smooth_peak", "evaluate")
+    assert p.returncode == 0 and p.stdout.split("\n")[:-1] == [f"{n} refused" for n in names], p.stdout + p.stderr
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)

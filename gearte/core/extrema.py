@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .precision import require_x64
 from .signal import TESignal, evaluate
 from .units import TWO_PI as _TWO_PI
 from .validate import as_int
@@ -364,6 +365,7 @@ def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 2, newt
 
     **Returns:** an `Extrema` (rad; input angles in rad).
     """
+    require_x64()
     if oversample < 8:
         raise ValueError(f"extrema: oversample must be ≥ 8 (got {oversample}); the candidate ranking needs it")
     if candidates < 1:
@@ -426,11 +428,12 @@ def spectrum(signal: TESignal) -> Spectrum:
 
 
 def smooth_peak(signal: TESignal, *, width: float | Float[Array, ""], oversample: int = 16) -> Float[Array, "*batch"]:
-    """Smooth upper bound of the peak |TE| for optimisers (rad).
+    """Smooth approximation of the peak |TE| for optimisers (rad).
 
     ``width · log Σ_grid (e^{TE/width} + e^{−TE/width})`` over the hyper-period grid:
-    it lies between the grid peak and the grid peak + ``width · log(2M)``, and is
-    infinitely differentiable in the coefficients. Report the exact `peak`.
+    it lies between the grid peak and the grid peak + ``width · log(2M)`` (an upper bound of the grid peak, not of
+    the exact peak, which can lie above the grid's by its sampling error), and is infinitely differentiable in the
+    coefficients. Report the exact `peak`.
 
     **Arguments:**
 
@@ -444,6 +447,7 @@ def smooth_peak(signal: TESignal, *, width: float | Float[Array, ""], oversample
         refused = False
     if refused:
         raise ValueError(f"smooth_peak: width must be > 0 rad, got {width}")
+    require_x64()
     if not signal.orders:
         return width * jnp.logaddexp(signal.offset / width, -signal.offset / width)
     m = grid_size(signal.orders, oversample)

@@ -8,7 +8,9 @@ user does it once before building any array::
     import jax
     jax.config.update("jax_enable_x64", True)
 
-Every public entry point calls `require_x64`, which raises a clear error otherwise.
+Every public entry point that builds or reads a TE (a drive's signal or response, the extrema,
+`evaluate`, the Monte Carlo, optimisers, solvers and fits) calls `require_x64`, which raises a
+clear error otherwise.
 """
 
 import jax

@@ -23,6 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .precision import require_x64
+
 FrequencyLike = int | Fraction | str | float
 
 
@@ -148,6 +150,7 @@ def to_signal(components: Components) -> TESignal:
     Components of equal |frequency| are added as phasors; negative frequencies are
     folded onto positive ones; frequency 0 gives a constant ``A sin φ``.
     """
+    require_x64()
     freqs = components.freq
     nonzero = sorted({abs(f) for f in freqs if f != 0})
     f0 = _gcd_fractions(nonzero) if nonzero else Fraction(1)
@@ -179,6 +182,7 @@ def evaluate(signal: TESignal, theta: ArrayLike) -> Float[Array, ...]:
     For a batched signal of shape ``(B,)`` and theta of shape ``(T,)`` pass
     ``theta[None, :]`` against a signal whose leaves are ``(B, 1, ...)``, or use `jax.vmap`.
     """
+    require_x64()
     theta = jnp.asarray(theta, dtype=float)
     tau = theta * float(signal.fundamental)
     out = signal.offset + jnp.zeros_like(tau)
