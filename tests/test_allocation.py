@@ -213,12 +213,44 @@ def test_rule_problem_validation():
         rule_problem(d, model, adjust={"b": "relative"}, datum="a", tolerances={"a": 1})
     with pytest.raises(ValueError, match="≥ 0"):
         rule_problem(d, model, adjust={"b": "relative"}, datum="a", tolerances={"a": 1, "b": -1})
+    with pytest.raises(ValueError, match="adjust: a mapping"):
+        rule_problem(d, model, adjust=["b"], datum="a", tolerances={"a": 1, "b": 1})  # pyright: ignore[reportArgumentType]
     with pytest.raises(ValueError, match="objective"):
         allocate_rule(rule_problem(d, model, adjust={"b": "relative"}, datum="a", tolerances={"a": 1, "b": 1}), objective="best", key=0)
     with pytest.raises(ValueError, match="adjust"):
         allocate_measured(d, {"a": gearte.Eccentricity(1.0), "b": gearte.Eccentricity(1.0)}, adjust={}, key=0)
     with pytest.raises(ValueError, match="step"):
         allocate_measured(d, {"a": gearte.Eccentricity(1.0), "b": gearte.Eccentricity(1.0)}, adjust={"b": -1.0}, key=0)
+
+
+def test_rule_offsets_and_counts_are_checked():
+    """One offset per adjusted source, by name or in order: a short or long array, a missing or unknown name, a NaN
+    are refused naming the argument (JAX would clamp an index past the end and answer for another rule)."""
+    d = explicit(("a", 1, 0.0), ("b", 1, 0.0), ("c", 1, 0.0))
+    model = gearte.ErrorModel({n: gearte.ErrorSource(1.0, gearte.UniformPhase()) for n in "abc"}, d.error_sources)
+    p = rule_problem(d, model, adjust={"b": "relative", "c": "relative"}, datum="a", tolerances={"a": 1, "b": 1, "c": 1})
+    for bad, match in (
+        ([2.4], r"worst_case: offsets: give one value per adjusted source \['b', 'c'\]"),
+        ([0.0, 0.0, 5.0], "shape \\(2,\\)"),
+        ({"b": 2.4}, "missing \\['c'\\]"),
+        ({"b": 0.0, "c": 0.0, "z": 1.0}, "\\['z'\\] are not adjusted"),
+        ([0.0, math.nan], "must be finite"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            worst_case(p, bad)
+    with pytest.raises(ValueError, match="evaluate_rule: offsets: name every adjusted source"):
+        gearte.evaluate_rule(p, {"b": 2.4}, key=0)
+    with pytest.raises(ValueError, match="expected: n_samples: must be ≥ 1"):
+        expected(p, [0.0, 0.0], key=0, n_samples=0)
+    # The same rule by name and in order.
+    assert float(worst_case(p, {"c": 0.5, "b": 0.2})) == float(worst_case(p, [0.2, 0.5]))
+    for kwargs, match in (
+        (dict(width=-1e-6), "width: must be > 0"),
+        (dict(starts=0), "starts: must be ≥ 1"),
+        (dict(max_steps=0), "max_steps"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            gearte.allocate_rule(p, key=0, **kwargs)
 
 
 def test_rule_objectives_are_objects_and_their_names_are_deprecated():

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -126,6 +127,19 @@ def test_zero_errors_give_zero_te(case):
     if name not in LOADED_TE:
         sizes = [float(np.max(np.abs(te))) for te in traces]
         assert min(sizes) <= 1e-9, sizes  # rad: zero, not only flat, in the unmodified design
+
+
+def test_bad_error_values_are_refused_naming_the_source(case):
+    """A NaN, a string or an eccentricity where a deviation is due (a number where an eccentricity is due) is refused
+    before anything is computed, naming the source: no drive answers inf or NaN for it."""
+    study, _ = case
+    drive = study.drive
+    for n, spec in drive.error_sources.items():
+        bad = [math.nan, "x", gearte.Eccentricity(1.0, 0.0)] if spec.kind == "deviation" else [1.0]
+        for value in bad:
+            errors = dict(drive.zero_errors()) | {n: value}
+            with pytest.raises(ValueError, match=re.escape(n)):
+                drive.response(errors)
 
 
 def test_vmap_equals_a_loop(case):

@@ -24,8 +24,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ..core.units import MM_PER_UM, TWO_PI
-from ..core.validate import as_float
+from ..core.validate import as_float, check_array_values
 from .cycloid_pin_grinding import GeneratingDeviation, generating_deviation, normal_deviation, rigid_pitch_error
+from .protocol import Eccentricity
 
 if TYPE_CHECKING:
     from .cycloid_pin import CycloidPin
@@ -240,20 +241,16 @@ class CycloidErrors(eqx.Module):
         pitch_accumulated: ArrayLike = 0.0,
         pitch_accumulated_phase: ArrayLike = 0.0,
     ):
-        f = lambda x: jnp.asarray(x, dtype=float)
-        self.dressing_x, self.dressing_y, self.infeed = f(dressing_x), f(dressing_y), f(infeed)
-        self.index_offset, self.indexing = f(index_offset), f(indexing)
-        self.setup_eccentricity, self.setup_phase = f(setup_eccentricity), f(setup_phase)
-        self.mandrel_runout, self.mandrel_phase = f(mandrel_runout), f(mandrel_phase)
-        self.pin_circle_radius, self.pin_radius, self.eccentricity = f(pin_circle_radius), f(pin_radius), f(eccentricity)
-        self.pin_tangential, self.pin_radial = f(pin_tangential), f(pin_radial)
-        self.disc_offset, self.disc_offset_phase = f(disc_offset), f(disc_offset_phase)
-        self.pin_wheel_offset, self.pin_wheel_offset_phase = f(pin_wheel_offset), f(pin_wheel_offset_phase)
-        self.pin_circle_eccentricity = f(pin_circle_eccentricity)
-        self.pin_circle_eccentricity_phase = f(pin_circle_eccentricity_phase)
-        self.wheel_radius, self.generating_eccentricity = f(wheel_radius), f(generating_eccentricity)
-        self.generating_chain, self.generating_chain_phase = f(generating_chain), f(generating_chain_phase)
-        self.pitch_accumulated, self.pitch_accumulated_phase = f(pitch_accumulated), f(pitch_accumulated_phase)
+        given = dict(locals())
+        for name in (f.name for f in dataclasses.fields(self)):
+            x = given[name]
+            if isinstance(x, Eccentricity):
+                raise ValueError(
+                    f"errors.{name}: a cycloid-pin error is a signed deviation (µm or rad; a magnitude and its phase are "
+                    "two fields); give a number or an array, not an Eccentricity"
+                )
+            check_array_values(f"errors.{name}", x)
+            setattr(self, name, jnp.asarray(x, dtype=float))
 
 
 #: Fields of `CycloidErrors` with one value per tooth space / per pin.
@@ -381,6 +378,8 @@ def checked_errors(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] 
     out = {}
     for name in ALL_ERROR_FIELDS:
         v = given.get(name, 0.0)
+        if isinstance(v, Eccentricity):
+            CycloidErrors(**{name: v})  # refused there, naming the field
         if any(isinstance(leaf, jax.Array) for leaf in jax.tree_util.tree_leaves(v)):
             v = jnp.asarray(v)  # JAX values (traced ones too), alone or in a list
         shape = np.shape(v)

@@ -280,6 +280,7 @@ class AbstractDrive(eqx.Module):
             else:
                 if isinstance(e, Eccentricity):
                     raise ValueError(f"{name}: errors[{n!r}] is a signed deviation ({spec.unit}); give a number or an array")
+                check_array_values(f"{name}: errors[{n!r}]", e, unit=spec.unit)
                 out[n] = _broadcast(name, n, "value", jnp.asarray(e, dtype=float), spec.shape)
         return out
 

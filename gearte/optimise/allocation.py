@@ -37,6 +37,7 @@ from ..core.programs import kept_jit
 from ..core.signal import Components, to_signal
 from ..core.solution import RESULTS, check
 from ..core.units import TWO_PI as _TWO_PI
+from ..core.validate import as_float, as_int, check_array_values
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
 from ..studies.errors import ErrorModel
 from ..studies.laws import FixedPhase, RelativePhase, UniformPhase
@@ -170,6 +171,12 @@ def rule_problem(
     - `tolerances`: µm per source: the magnitudes for the worst-case and expected objectives.
     """
     check_phase_drive(drive)
+    if not isinstance(model, ErrorModel):
+        raise ValueError(
+            f"model: an ErrorModel of the drive's sources (gearte.ErrorModel(sources, drive.error_sources)), got {type(model).__name__}"
+        )
+    if not isinstance(adjust, Mapping):
+        raise ValueError(f"adjust: a mapping of source → 'relative' or 'absolute', e.g. {{'carrier_assembly': 'relative'}}; got {adjust!r}")
     counts = model.counts
     for n, mode in adjust.items():
         if n not in counts:
@@ -226,6 +233,28 @@ def _group_parts(p: RuleProblem, offsets: Array, group: np.ndarray) -> list:
     return parts
 
 
+def rule_offsets(p: RuleProblem, offsets: Mapping[str, Any] | Array, *, where: str) -> Array:
+    """A rule's offsets (rad) as an array in the order of `p.adjust`: a mapping naming every adjusted source once,
+    or one value per adjusted source (finite where given as numbers); else a ValueError naming `where`."""
+    names = list(p.adjust)
+    if isinstance(offsets, Mapping):
+        missing, unknown = [n for n in names if n not in offsets], [n for n in offsets if n not in names]
+        if missing or unknown:
+            raise ValueError(
+                f"{where}: offsets: name every adjusted source {names} once"
+                + (f"; missing {missing}" if missing else "")
+                + (f"; {unknown} are not adjusted" if unknown else "")
+            )
+        for n in names:
+            check_array_values(f"{where}: offsets[{n!r}]", offsets[n], unit="rad")
+        return jnp.stack([jnp.asarray(offsets[n], dtype=float) for n in names])
+    check_array_values(f"{where}: offsets", offsets, unit="rad")
+    off = jnp.asarray(offsets, dtype=float)
+    if off.shape != (len(names),):
+        raise ValueError(f"{where}: offsets: give one value per adjusted source {names} (shape ({len(names)},)), got shape {off.shape}")
+    return off
+
+
 def worst_case(p: RuleProblem, offsets: Array, *, metric: AbstractMetric = Peak()) -> Float[Array, ""]:
     """Worst case of the exact peak over every unknown phase, magnitudes at the tolerances (rad).
 
@@ -236,10 +265,11 @@ def worst_case(p: RuleProblem, offsets: Array, *, metric: AbstractMetric = Peak(
     """
     if not isinstance(metric, Peak):
         raise ValueError("worst_case: only the peak metric (gearte.Peak()) is supported")
+    off = rule_offsets(p, offsets, where="worst_case")
     group, single = _groups(p)
     if not single:
         raise ValueError("worst_case: an unknown phase drives components of several frequencies; use the expected objective")
-    return jnp.asarray(sum(metric(p.drive, sig) for _, sig in _group_parts(p, jnp.asarray(offsets, dtype=float), group)))
+    return jnp.asarray(sum(metric(p.drive, sig) for _, sig in _group_parts(p, off, group)))
 
 
 def _smooth_worst_case(p: RuleProblem, offsets: Array, group: np.ndarray, width: float | Array) -> Array:
@@ -299,7 +329,8 @@ def expected(
 ) -> Float[Array, ""]:
     """Mean exact metric (rad) over uniform unknown phases, magnitudes at the tolerances
     (or drawn by their laws if `robust`), by Monte Carlo with `n_samples` samples."""
-    fn = _RuleSample(p, jnp.asarray(offsets, dtype=float), robust, metric)
+    n_samples = as_int("expected: n_samples", n_samples, minimum=1)
+    fn = _RuleSample(p, rule_offsets(p, offsets, where="expected"), robust, metric)
     return jnp.mean(jnp.asarray(monte_carlo(fn, key=key, n_samples=n_samples, block_size=1024, progress=False).values))
 
 
@@ -341,7 +372,8 @@ def evaluate_rule(
     p: RuleProblem, offsets: Mapping[str, float] | Array, *, key: int | PRNGKeyArray, n_check: int = 50_000
 ) -> dict[str, Array]:
     """Exact worst case, expected and robust TE (rad) of a rule (e.g. Wang et al.'s Table 3 rule)."""
-    off = jnp.asarray([offsets[n] for n in p.adjust], dtype=float) if isinstance(offsets, Mapping) else jnp.asarray(offsets, dtype=float)
+    off = rule_offsets(p, offsets, where="evaluate_rule")
+    n_check = as_int("evaluate_rule: n_check", n_check, minimum=1)
     k1, k2 = jax.random.split(as_key(key))
     return {
         "worst_case": worst_case(p, off),
@@ -412,6 +444,12 @@ def allocate_rule(
     """
     require_x64()
     objective = _rule_objective(objective)
+    starts = as_int("allocate_rule: starts", starts, minimum=1)
+    n_samples = as_int("allocate_rule: n_samples", n_samples, minimum=1)
+    n_check = as_int("allocate_rule: n_check", n_check, minimum=1)
+    max_steps = as_int("allocate_rule: max_steps", max_steps, minimum=1)
+    if width is not None:
+        width = as_float("allocate_rule: width", width, positive=True, hint="rad")
     k_start, k_crn, k_check = jax.random.split(as_key(key), 3)
     m = len(p.adjust)
     group, single = _groups(p)
