@@ -141,6 +141,13 @@ def check_modification(drive: CycloidPin) -> None:
             )
 
 
+def _not_eccentricity(name: str) -> str:
+    return (
+        f"errors.{name}: a cycloid-pin error is a signed deviation (µm or rad; a magnitude and its phase are two fields); "
+        "give a number or an array, not an Eccentricity"
+    )
+
+
 class CycloidErrors(eqx.Module):
     """The errors of one reducer: its disc's form-grinding errors and its own (Yao & Liang 2001, eqs. 1–3).
 
@@ -245,10 +252,7 @@ class CycloidErrors(eqx.Module):
         for name in (f.name for f in dataclasses.fields(self)):
             x = given[name]
             if isinstance(x, Eccentricity):
-                raise ValueError(
-                    f"errors.{name}: a cycloid-pin error is a signed deviation (µm or rad; a magnitude and its phase are "
-                    "two fields); give a number or an array, not an Eccentricity"
-                )
+                raise ValueError(_not_eccentricity(name))
             check_array_values(f"errors.{name}", x)
             setattr(self, name, jnp.asarray(x, dtype=float))
 
@@ -379,7 +383,7 @@ def checked_errors(drive: CycloidPin, errors: CycloidErrors | Mapping[str, Any] 
     for name in ALL_ERROR_FIELDS:
         v = given.get(name, 0.0)
         if isinstance(v, Eccentricity):
-            CycloidErrors(**{name: v})  # refused there, naming the field
+            raise ValueError(_not_eccentricity(name))
         if any(isinstance(leaf, jax.Array) for leaf in jax.tree_util.tree_leaves(v)):
             v = jnp.asarray(v)  # JAX values (traced ones too), alone or in a list
         shape = np.shape(v)
