@@ -49,6 +49,17 @@ def test_measured_record_refuses_mismatched_lengths_and_non_finite_values():
         MeasuredRecord(np.where(theta == 0.0, np.inf, theta), te)
     with pytest.raises(RecordError, match=r"te must be 1-D .* got shape \(32, 1\)"):
         MeasuredRecord(theta, te[:, None])
+    # The grid its step, samples per revolution and span are read from: increasing, uniform, two samples at least.
+    uneven = np.concatenate([theta[:3], theta[3:] + 0.05])
+    with pytest.raises(RecordError, match=r"theta, sample 4: the input angles must be a uniform grid"):
+        MeasuredRecord(uneven, te)
+    with pytest.raises(RecordError, match=r"theta, sample 2: input angles must increase"):
+        MeasuredRecord(theta[::-1], te)
+    with pytest.raises(RecordError, match=r"at least 2 samples, got 1"):
+        MeasuredRecord(theta[:1], te[:1])
+    # A long computed grid (1,000 revolutions at 4,096 samples each) is uniform to its rounding.
+    long = np.arange(4_096_000) * (2 * math.pi / 4096)
+    assert MeasuredRecord(long, np.zeros(long.size)).revolutions == pytest.approx(1000.0, rel=1e-12)
     r = MeasuredRecord(theta, te, input_rpm=60.0)
     assert r.points_per_rev == pytest.approx(32.0)
     # Under jit the fields are traced and pass unchecked.

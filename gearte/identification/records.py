@@ -51,6 +51,10 @@ class RecordError(ValueError):
     """A measured record cannot be used; the message names the file, the column or row, and the fix."""
 
 
+#: A `MeasuredRecord`'s steps may differ from its first by this fraction of it (rounding of a computed grid).
+UNIFORM_STEP = 1e-6
+
+
 class MeasuredRecord(eqx.Module):
     """A TE record on a uniform grid of input angles.
 
@@ -81,6 +85,21 @@ class MeasuredRecord(eqx.Module):
             )
         for k in ("theta", "te"):
             _check_finite(k, np.asarray(getattr(self, k), dtype=np.float64), self.source)
+        theta = np.asarray(self.theta, dtype=np.float64)
+        if theta.size < 2:
+            _fail(self.source, f"theta: a record needs at least 2 samples, got {theta.size}")
+        d = np.diff(theta)
+        if not np.all(d > 0):
+            _fail(self.source, f"theta, sample {int(np.argmin(d > 0)) + 2}: input angles must increase from sample to sample")
+        # Uniform to a millionth of a step (a grid from np.arange or np.linspace is uniform to rounding, far below it);
+        # a record read from a file is put on such a grid by `read_record`.
+        if np.any(np.abs(d - d[0]) > UNIFORM_STEP * d[0]):
+            k = int(np.argmax(np.abs(d - d[0]) > UNIFORM_STEP * d[0]))
+            _fail(
+                self.source,
+                f"theta, sample {k + 2}: the input angles must be a uniform grid (step {d[0]:.6g} rad from the first two "
+                f"samples, {d[k]:.6g} rad here); gearte.read_record interpolates a measured record onto one",
+            )
 
     @property
     def revolutions(self) -> float:
@@ -289,7 +308,7 @@ def record_from_columns(
             f"the TE varies by {big:.3g} rad ({math.degrees(big):.3g}°), far more than any gear drive's: check the TE column's unit "
             "(e.g. arcsec given as rad)",
         )
-    return resample(MeasuredRecord(theta=theta, te=te, input_rpm=rpm, source=source))
+    return _uniform(theta, te, input_rpm=rpm, source=source)
 
 
 def _check_grid(theta: np.ndarray, source: str) -> None:
@@ -331,19 +350,33 @@ def _te_from_angles(theta: np.ndarray, out: np.ndarray, ratio, source: str) -> n
 
 
 def resample(rec: MeasuredRecord, *, points_per_rev: float | None = None) -> MeasuredRecord:
-    """`rec` on a uniform grid of input angles from its first sample, with `points_per_rev` samples per input
-    revolution (default: its median step), by linear interpolation; a record already uniform (to 1e-9
-    of a step) is returned as it is."""
-    theta = np.asarray(rec.theta, dtype=np.float64)
-    d = np.diff(theta)
-    step = float(np.median(d)) if points_per_rev is None else TWO_PI / float(points_per_rev)
-    if not step > 0:
-        raise RecordError(f"{rec.source}: points_per_rev must be > 0")
-    if points_per_rev is None and np.all(np.abs(d - step) <= 1e-9 * step):
+    """`rec` on the uniform grid of `points_per_rev` samples per input revolution from its first sample (default: its
+    own, returned as it is), by linear interpolation."""
+    if points_per_rev is None:
         return rec
+    ppr = float(points_per_rev)
+    if not (math.isfinite(ppr) and ppr > 0):
+        raise RecordError(f"{rec.source}: points_per_rev must be a finite number > 0, got {points_per_rev!r}")
+    theta = np.asarray(rec.theta, dtype=np.float64)
+    step = TWO_PI / ppr
     n = int(math.floor((theta[-1] - theta[0]) / step + 1e-9)) + 1
+    if n < 2:
+        raise RecordError(f"{rec.source}: points_per_rev = {ppr:g} leaves fewer than 2 samples in the record")
     grid = theta[0] + step * np.arange(n)
     return MeasuredRecord(theta=grid, te=np.interp(grid, theta, np.asarray(rec.te)), input_rpm=rec.input_rpm, source=rec.source)
+
+
+def _uniform(theta: np.ndarray, te: np.ndarray, *, input_rpm: float | None, source: str) -> MeasuredRecord:
+    """A record (strictly increasing input angles `theta`) on a uniform grid of input angles from its first sample at
+    its median step, by linear interpolation; one already uniform (to 1e-9 of a step) is kept as it is."""
+    theta = np.asarray(theta, dtype=np.float64)
+    d = np.diff(theta)
+    step = float(np.median(d))
+    if not np.all(np.abs(d - step) <= 1e-9 * step):
+        n = int(math.floor((theta[-1] - theta[0]) / step + 1e-9)) + 1
+        grid = theta[0] + step * np.arange(n)
+        theta, te = grid, np.interp(grid, theta, np.asarray(te))
+    return MeasuredRecord(theta=theta, te=te, input_rpm=input_rpm, source=source)
 
 
 def write_record(path: str | Path, rec: MeasuredRecord, *, unit: str = "arcsec", digits: int = 6) -> None:
@@ -389,7 +422,7 @@ def synthetic_record(
         theta = np.asarray(tr.theta, dtype=np.float64)
         ratio = float(getattr(drive, "ratio", 1.0))
         te = encoder_noise(theta, tr.te, key=key, ratio=ratio, noise=noise, counts_per_rev=counts_per_rev)
-        return resample(MeasuredRecord(theta=theta, te=te, input_rpm=input_rpm, source="synthetic record"))
+        return _uniform(theta, te, input_rpm=input_rpm, source="synthetic record")
     if not isinstance(drive, AbstractSinusoidalDrive):
         raise ValueError("synthetic_record: needs a sinusoidal drive (planetary_2kh, harmonic, explicit) or a grid drive (cycloid_pin)")
     if revolutions is None or points_per_rev is None:
