@@ -85,6 +85,34 @@ def test_contributions_checks_n_samples_and_tolerances():
     assert set(c) == {"a", "b"} and all(math.isfinite(v) and v > 0 for v in c.values())
 
 
+def test_budget_arguments_are_checked_before_any_sample_is_drawn():
+    """A misspelt source in `maximum` or `minimum` is refused (it had been ignored, the default bound used instead);
+    counts below one, a model of another drive, a bare constraint or spec are refused naming the argument."""
+    with pytest.raises(ValueError, match=r"maximum: \['c'\] are not budgeted sources; use some of \['a', 'b'\]"):
+        small_problem(maximum={"c": 5.0})
+    with pytest.raises(ValueError, match=r"minimum: \['A'\] are not budgeted sources"):
+        small_problem(minimum={"A": 1.0})
+    with pytest.raises(ValueError, match=r"maximum\['a'\]: must be a finite number, got nan"):
+        small_problem(maximum={"a": math.nan})
+    with pytest.raises(ValueError, match=r"nominal\['a'\]: expected a number, got 'x'"):
+        budget_problem(explicit_drive(), small_problem().model, costs=small_problem().costs, nominal={"a": "x", "b": 1.0}, spec=1e-4)
+    other = ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("c", 2)], gain=GAIN)
+    with pytest.raises(ValueError, match=r"model: the error model's sources \['a', 'b'\] do not match the drive's \['a', 'c'\]"):
+        budget_problem(other, small_problem().model, costs={"a": gearte.Reciprocal(0.0, 1.0)}, nominal={"a": 1.0}, spec=1e-4)
+    q = small_problem()
+    with pytest.raises(ValueError, match=r"constraints: a list of gearte.Constraint objects"):
+        budget_problem(q.drive, q.model, costs=q.costs, nominal={"a": 1.0, "b": 1.0}, constraints=q.constraints[0])  # pyright: ignore[reportArgumentType]
+    p = small_problem()
+    for call, match in (
+        (lambda: gearte.optimise_budget(p, key=0, n_samples=0), "optimise_budget: n_samples: must be ≥ 1, got 0"),
+        (lambda: gearte.optimise_budget(p, key=0, n_check=0), "optimise_budget: n_check: must be ≥ 1, got 0"),
+        (lambda: gearte.uniform_scaling(p, key=0, n_check=0), "uniform_scaling: n_check: must be ≥ 1, got 0"),
+        (lambda: pareto_front(p, 2e-4, key=0), "pareto_front: specs: a list of specs"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            call()
+
+
 # 3. pareto_front
 
 

@@ -39,7 +39,7 @@ from ..core.solution import RESULTS, check
 from ..core.units import TWO_PI as _TWO_PI
 from ..core.validate import as_float, as_int, check_array_values
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
-from ..studies.errors import ErrorModel
+from ..studies.errors import ErrorModel, check_drive_model
 from ..studies.laws import FixedPhase, RelativePhase, UniformPhase
 from ..studies.montecarlo import as_key, monte_carlo
 from .rule_objectives import RULE_OBJECTIVES, AbstractRuleObjective, WorstCase
@@ -171,10 +171,7 @@ def rule_problem(
     - `tolerances`: µm per source: the magnitudes for the worst-case and expected objectives.
     """
     check_phase_drive(drive)
-    if not isinstance(model, ErrorModel):
-        raise ValueError(
-            f"model: an ErrorModel of the drive's sources (gearte.ErrorModel(sources, drive.error_sources)), got {type(model).__name__}"
-        )
+    check_drive_model(drive, model)
     if not isinstance(adjust, Mapping):
         raise ValueError(f"adjust: a mapping of source → 'relative' or 'absolute', e.g. {{'carrier_assembly': 'relative'}}; got {adjust!r}")
     counts = model.counts

@@ -37,7 +37,7 @@ from __future__ import annotations
 import functools
 import math
 import sys
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import equinox as eqx
@@ -345,6 +345,9 @@ def optimise_budget(
     **Returns:** a `BudgetResult`.
     """
     require_x64()
+    n_samples = as_int("optimise_budget: n_samples", n_samples, minimum=1)
+    n_check = as_int("optimise_budget: n_check", n_check, minimum=1)
+    max_steps = as_int("optimise_budget: max_steps", max_steps, minimum=1)
     k_crn, k_check = jax.random.split(as_key(key))
     draws = common_draws(p, k_crn, n_samples)
     # Feasible at all? At the minimum tolerances, or (none given) at the finest the scale search reaches.
@@ -409,6 +412,7 @@ def _failed(p: BudgetProblem, result) -> BudgetResult:
 def uniform_scaling(p: BudgetProblem, *, key: int | PRNGKeyArray, n_check: int = 50_000, progress: bool | None = None) -> BudgetResult:
     """Baseline: the nominal tolerances scaled by one common factor to meet the same constraints (`progress`: a bar
     over the passes over the fresh samples, by default when stderr is a terminal)."""
+    n_check = as_int("uniform_scaling: n_check", n_check, minimum=1)
     _, k_check = jax.random.split(as_key(key))
     return _calibrate_and_verify(
         p,
@@ -454,6 +458,8 @@ def pareto_front(
     `throw`: raise at the first spec that cannot be met or whose optimiser fails, as `optimise_budget(throw=True)`
     does (default False: such a point comes back with its `result` set, and the front goes on)."""
     c0 = p.constraints[0]
+    if isinstance(specs, (str, bytes)) or not isinstance(specs, Iterable):
+        raise ValueError(f"pareto_front: specs: a list of specs of the first constraint (rad for angles), got {specs!r}")
     problems = []
     for i, s in enumerate(specs):
         try:

@@ -19,8 +19,9 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..core.metrics import AbstractMetric, Peak, check_offered
 from ..core.programs import kept_jit
+from ..core.validate import as_float
 from ..drives.protocol import AbstractDrive, Eccentricity
-from ..studies.errors import ErrorModel
+from ..studies.errors import ErrorModel, check_drive_model
 from ..studies.laws import AbstractValueLaw
 from ..studies.montecarlo import sample_keys
 from .costs import AbstractCostModel
@@ -117,6 +118,13 @@ def budget_problem(
     - `width`: width of the smoothed quantile relative to the mean of each metric (default
       0.005). Relative, so that a homogeneous statistic stays exactly homogeneous.
     """
+    check_drive_model(drive, model)
+    if not isinstance(costs, Mapping):
+        raise ValueError(
+            f"costs: a mapping of error source → cost model, e.g. {{'sun_manufacturing': gearte.Reciprocal(0.0, 40.0)}}; got {costs!r}"
+        )
+    if not isinstance(nominal, Mapping):
+        raise ValueError(f"nominal: a mapping of budgeted source → nominal tolerance; got {nominal!r}")
     names = list(costs)
     unknown = [n for n in names if n not in model.specs]
     if unknown:
@@ -135,19 +143,21 @@ def budget_problem(
     for n in names:
         if not isinstance(costs[n], AbstractCostModel):
             raise ValueError(f"costs[{n!r}]: expected a cost model such as gearte.Reciprocal(a, b)")
-        t = float(nominal[n])
-        if not (math.isfinite(t) and t > 0):
-            raise ValueError(f"nominal[{n!r}]: a tolerance must be > 0, got {nominal[n]!r}")
+        as_float(f"nominal[{n!r}]", nominal[n], positive=True, hint="a tolerance")
+    for what, m in (("maximum", maximum), ("minimum", minimum)):
+        if m is not None and not isinstance(m, Mapping):
+            raise ValueError(f"{what}: a mapping of budgeted source → tolerance, got {m!r}")
+        extra = [n for n in (m or {}) if n not in names]
+        if extra:
+            raise ValueError(f"{what}: {extra} are not budgeted sources; use some of {names}")
     maximum = dict(maximum or {})
     for n in names:
-        tmax = float(maximum.get(n, 10 * float(nominal[n])))
-        if not (math.isfinite(tmax) and tmax > 0):
-            raise ValueError(f"maximum[{n!r}]: must be > 0, got {tmax!r}")
+        tmax = as_float(f"maximum[{n!r}]", maximum.get(n, 10 * float(nominal[n])), positive=True)
         maximum[n] = tmax
     minimum = dict(minimum or {})
     for n in names:
-        tmin = float(minimum.get(n, 0.0))
-        if not (math.isfinite(tmin) and 0 <= tmin < maximum[n]):
+        tmin = as_float(f"minimum[{n!r}]", minimum.get(n, 0.0))
+        if not 0 <= tmin < maximum[n]:
             raise ValueError(f"minimum[{n!r}]: must be ≥ 0 and below the maximum {maximum[n]:g}, got {tmin!r}")
         minimum[n] = tmin
     if constraints is None:
@@ -156,6 +166,8 @@ def budget_problem(
         constraints = [Constraint(metric, spec, statistic)]
     elif spec is not None:
         raise ValueError("give either `spec` (one constraint) or `constraints`, not both")
+    if isinstance(constraints, Constraint) or not isinstance(constraints, (list, tuple)):
+        raise ValueError(f"constraints: a list of gearte.Constraint objects, got {constraints!r}")
     constraints = tuple(constraints)
     if not constraints:
         raise ValueError("constraints: give at least one")

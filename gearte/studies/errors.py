@@ -152,3 +152,12 @@ class ErrorModel(eqx.Module):
                 phase = rule.sample(k_ph, spec.shape)
             out[name] = Eccentricity(mag, phase)
         return {n: out[n] for n in names}
+
+
+def check_drive_model(drive: Any, model: Any, *, name: str = "model") -> None:
+    """Raise a ValueError naming the argument `name` unless `model` is an `ErrorModel` of `drive`'s error sources (the
+    same names in the same order, the same declarations)."""
+    if not isinstance(model, ErrorModel):
+        raise ValueError(f"{name}: expected an ErrorModel (gearte.ErrorModel(sources, drive.error_sources)), got {type(model).__name__}")
+    if list(model.specs) != list(drive.error_sources) or model.specs != drive.error_sources:
+        raise ValueError(f"{name}: the error model's sources {list(model.specs)} do not match the drive's {list(drive.error_sources)}")

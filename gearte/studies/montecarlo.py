@@ -32,7 +32,7 @@ from ..core.programs import kept_program
 from ..core.schema import MAX_SAMPLES
 from ..core.validate import is_traced
 from ..drives.protocol import AbstractDrive, AbstractSinusoidalDrive
-from .errors import ErrorModel
+from .errors import ErrorModel, check_drive_model
 
 PERCENTILES = (1.0, 5.0, 50.0, 95.0, 99.0, 99.73)
 DEFAULT_SAMPLES = 50_000
@@ -70,10 +70,7 @@ class TEStudy(eqx.Module):
     def __init__(self, drive: AbstractDrive, errors: ErrorModel, *, metric: AbstractMetric | tuple[AbstractMetric, ...] | None = None):
         if not isinstance(drive, AbstractDrive):
             raise ValueError(f"drive: expected a gearte drive, got {type(drive).__name__}")
-        if not isinstance(errors, ErrorModel):
-            raise ValueError(f"errors: expected an ErrorModel, got {type(errors).__name__}")
-        if list(errors.specs) != list(drive.error_sources) or errors.specs != drive.error_sources:
-            raise ValueError(f"errors: the error model's sources {list(errors.specs)} do not match the drive's {list(drive.error_sources)}")
+        check_drive_model(drive, errors, name="errors")
         offered = drive.metrics
         if metric is None:
             metric = next(iter(offered.values()))

@@ -30,7 +30,7 @@ from ..core.programs import kept_jit
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
 from ..core.validate import as_int
 from ..drives.protocol import AbstractDrive
-from .errors import ErrorModel
+from .errors import ErrorModel, check_drive_model
 from .laws import Uniform
 from .montecarlo import as_key
 
@@ -106,8 +106,7 @@ def pathwise_sensitivities(
     for m in metrics:
         if m.name not in offered or type(offered[m.name]) is not type(m):
             raise ValueError(f"metrics: {type(drive).__name__} offers {list(offered)}, not {m.name!r}")
-    if not isinstance(model, ErrorModel) or list(model.specs) != list(drive.error_sources):
-        raise ValueError("model: expected the drive's ErrorModel (its sources in the drive's order)")
+    check_drive_model(drive, model)
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
         raise ValueError(f"n_samples: must be a whole number ≥ 1, got {n_samples!r}")
     chunk = min(as_int("chunk", chunk, minimum=1), int(n_samples))
