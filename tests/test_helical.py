@@ -245,6 +245,18 @@ def test_wind_turbine_report_shares_the_drive_s_compiled_solve(model, tmp_path):
     assert first.splitlines()[2] != second.splitlines()[2]
 
 
+def test_the_model_refuses_a_solver_it_cannot_use(model):
+    """A solver that is not a PeriodicSolver, or a kept window too short for the 16 harmonics of the DTE spectrum
+    (it had failed inside the solve with a shape error), or a smoothing that is not a positive number."""
+    with pytest.raises(ValueError, match=r"solver: a gearte.PeriodicSolver"):
+        HelicalPlanetary(model.stage, solver={"n_periods": 4})  # pyright: ignore[reportArgumentType]
+    with pytest.raises(ValueError, match=r"samples_per_period × record_periods = 29 samples .* need at least 30"):
+        HelicalPlanetary(model.stage, solver=PeriodicSolver(4, samples_per_period=29))
+    assert HelicalPlanetary(model.stage, solver=PeriodicSolver(4, samples_per_period=15, record_periods=2)).solver.record_periods == 2
+    with pytest.raises(ValueError, match=r"contact_smoothing: expected a number, got 'x'"):
+        HelicalPlanetary(model.stage, contact_smoothing="x")  # pyright: ignore[reportArgumentType]
+
+
 def test_parameter_files_name_the_table_and_key_of_a_bad_number(tmp_path):
     """Tooth counts and solver counts are whole numbers: 21.5 teeth or "8" slices are named, not truncated."""
     text = EXAMPLE.read_text(encoding="utf-8")
@@ -459,6 +471,10 @@ def test_a_solve_whose_state_turns_non_finite_says_so_in_its_result():
     bad_system = eqx.tree_at(lambda s: s.excitation.amplitude, _oscillator(), jnp.asarray(jnp.nan))
     bad = eqx.filter_jit(solve_periodic)(bad_system, PeriodicSolver(10, steps_per_period=128, samples_per_period=32))
     assert bad.result == RESULTS.nonfinite and math.isnan(float(bad.periodicity))
+    # 4 steps per mesh period put the oscillator's mode (6π per period) beyond Tsit5's stability limit (h ω = 4.7): the
+    # state grows to 6e17 µm, finite, and is reported as diverged rather than as a solution.
+    unstable = _oscillator_solution(4)
+    assert float(jnp.max(jnp.abs(unstable.q))) > 1e15 and unstable.result == RESULTS.nonfinite
 
 
 def test_solution_converges_at_the_fifth_order_of_tsit5():

@@ -15,7 +15,6 @@ parameter file (`load_helical`, e.g. ``examples/dynamics/helical_wind_turbine.to
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -27,7 +26,7 @@ from jaxtyping import Array, Float
 from ..core.programs import kept_jit
 from ..core.solution import RESULTS
 from ..core.units import ARCSEC_PER_RAD
-from ..core.validate import as_int
+from ..core.validate import as_float, as_int
 from .helical_equations import SUN, StageSystem, error_sources, stage_system
 from .helical_geometry import HelicalStage, geometry
 from .helical_modifications import StageModifications, modifications_from_amounts
@@ -44,6 +43,10 @@ from .protocol import Eccentricity
 
 #: Zhang, Chen & Wang's unmodified DTE fluctuations of the 750 kW stage, µm (external s–p, internal p–r).
 PAPER_FLUCTUATION_UM = (26.17, 8.79)
+
+
+#: Harmonics of the window's fundamental in `DynamicResponse.spectrum` (0 … 15).
+HARMONICS = 16
 
 
 class DynamicResponse(eqx.Module):
@@ -105,13 +108,21 @@ class HelicalPlanetary(eqx.Module):
     ):
         if not isinstance(stage, HelicalStage):
             raise ValueError("HelicalPlanetary: stage must be a HelicalStage")
-        if not (math.isfinite(contact_smoothing) and contact_smoothing > 0):
-            raise ValueError(f"contact_smoothing: must be > 0 µm, got {contact_smoothing!r}")
+        contact_smoothing = as_float("contact_smoothing", contact_smoothing, positive=True, hint="µm")
+        solver = solver if solver is not None else PeriodicSolver()
+        if not isinstance(solver, PeriodicSolver):
+            raise ValueError(f"solver: a gearte.PeriodicSolver(n_periods, steps_per_period=…, samples_per_period=…), got {solver!r}")
+        window = solver.samples_per_period * solver.record_periods
+        if window < 2 * (HARMONICS - 1):
+            raise ValueError(
+                f"solver: samples_per_period × record_periods = {window} samples over the kept window; the DTE spectrum's "
+                f"{HARMONICS} harmonics need at least {2 * (HARMONICS - 1)}"
+            )
         self.stage = stage
         self.n_slices = as_int("n_slices", n_slices, minimum=1)
         self.stiffness_model = check_stiffness_model("stiffness_model", stiffness_model)
-        self.contact_smoothing = float(contact_smoothing)
-        self.solver = solver if solver is not None else PeriodicSolver()
+        self.contact_smoothing = contact_smoothing
+        self.solver = solver
         self.pairs = pair_range(geometry(stage), float(stage.face_width), self.n_slices)
 
     @property
@@ -158,7 +169,7 @@ class HelicalPlanetary(eqx.Module):
             mesh_force=mesh_force,
             output_te=te,
             output_te_peak_to_peak=peak_to_peak(te),
-            spectrum=harmonics(dte, 16),
+            spectrum=harmonics(dte, HARMONICS),
             periodicity=sol.periodicity,
             result=sol.result,
         )
