@@ -308,3 +308,23 @@ def test_explicit_frequencies_whose_exact_extrema_would_not_fit_are_refused(freq
     assert shown in str(e.value)
     # At the bound itself the drive is built.
     ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", MAX_PERIODS)], gain=GAIN)
+
+
+def test_an_eccentricity_magnitude_is_drawn_by_a_value_law_that_stays_positive():
+    """A magnitude law that can draw below 0 within its bounds, a pattern over teeth (Sinusoid) or a phase law where a
+    magnitude is due are refused naming the source; an unbounded Normal is allowed (a negative draw is the phase + π)."""
+    d = explicit_drive()
+    for law, match in (
+        (gearte.Uniform(-1.0, 5.0), r"error source 'a': its magnitude law .* can draw negative values"),
+        (gearte.Sinusoid(5.0, 0.0), r"error source 'a': the magnitude of an eccentricity is drawn by a value law .* not Sinusoid"),
+        (gearte.UniformPhase(), r"error source 'a': the magnitude of an eccentricity is drawn by a value law .* not UniformPhase"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            gearte.ErrorModel(
+                {"a": gearte.ErrorSource(law, gearte.UniformPhase()), "b": gearte.ErrorSource(1.0, gearte.UniformPhase())},  # pyright: ignore[reportArgumentType]
+                d.error_sources,
+            )
+    gearte.ErrorModel(
+        {"a": gearte.ErrorSource(gearte.Normal(0.0, 5.0), gearte.UniformPhase()), "b": gearte.ErrorSource(1.0, gearte.UniformPhase())},
+        d.error_sources,
+    )

@@ -99,6 +99,13 @@ class ErrorModel(eqx.Module):
             src = sources[n]
             if not isinstance(src, ErrorSource):
                 raise ValueError(f"error source {n!r}: expected an ErrorSource, got {type(src).__name__}")
+            # A phase law draws a deviation that is itself an angle (a cycloid set-up phase), never a magnitude; a
+            # Sinusoid draws a pattern of deviations over tooth spaces or pins.
+            if spec.kind == "eccentricity" and not isinstance(src.magnitude, AbstractValueLaw):
+                raise ValueError(
+                    f"error source {n!r}: the magnitude of an eccentricity is drawn by a value law (Fixed, Uniform, "
+                    f"Normal, TruncatedNormal, Rayleigh), not {type(src.magnitude).__name__}"
+                )
             if spec.kind == "eccentricity":
                 if src.phase is None:
                     raise ValueError(f"error source {n!r} is an eccentricity: give it a phase law or assembly rule")
