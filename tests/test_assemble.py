@@ -70,6 +70,15 @@ def test_random_batches_below_one_is_refused_before_any_work():
     for bad in (0, -5, 2.5, True, np.int64(0)):
         with pytest.raises(ValueError, match="random_batches: the comparison needs at least one random assembly"):
             assemble_batch(DRIVE, parts(3, seed=7), key=0, random_batches=bad)
+    # Rounds and candidates below one (an empty search), a metric the report cannot state.
+    for kwargs, match in (
+        (dict(candidates=0), "candidates: must be ≥ 1"),
+        (dict(rounds=-1), "rounds: must be ≥ 0"),
+        (dict(metric=gearte.RMS()), r"metric: gearte.Peak\(\) or gearte.PeakToPeak\(\)"),
+        (dict(metric=gearte.Peak), r"metric: gearte.Peak\(\) or gearte.PeakToPeak\(\)"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            assemble_batch(DRIVE, parts(3, seed=7), key=0, **kwargs)  # pyright: ignore[reportArgumentType]
 
 
 def test_a_second_batch_of_the_same_drive_traces_nothing():

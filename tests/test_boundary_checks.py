@@ -328,3 +328,27 @@ def test_an_eccentricity_magnitude_is_drawn_by_a_value_law_that_stays_positive()
         {"a": gearte.ErrorSource(gearte.Normal(0.0, 5.0), gearte.UniformPhase()), "b": gearte.ErrorSource(1.0, gearte.UniformPhase())},
         d.error_sources,
     )
+
+
+def test_counts_and_options_of_the_library_functions_are_checked():
+    """Counts, sizes and options that had passed into the computation (a JAX shape error, a float rounded down, a
+    sum over nothing) are refused naming the argument."""
+    d = explicit_drive()
+    model = gearte.ErrorModel({n: gearte.ErrorSource(1.0, gearte.UniformPhase()) for n in "ab"}, d.error_sources)
+    sig = d.signal(d.zero_errors() | {"a": gearte.Eccentricity(1.0, 0.0)})
+    for call, match in (
+        (lambda: gearte.TEStudy(d, model, metric=()), r"metric: give a metric of the drive or a tuple of them"),
+        (lambda: gearte.monte_carlo(d, key=0, n_samples=4), r"fn: one sample as a function of its key"),  # pyright: ignore[reportArgumentType]
+        (lambda: gearte.monte_carlo(gearte.TEStudy(d, model), key=0, n_samples=4, block_size=2**40), r"block_size: at most"),
+        (lambda: gearte.monte_carlo(gearte.TEStudy(d, model), key=0, n_samples=4, on_chunk=1), r"on_chunk: a function"),  # pyright: ignore[reportArgumentType]
+        (lambda: extrema(sig, oversample=8.5), r"extrema: oversample: must be a whole number, got 8.5"),  # pyright: ignore[reportArgumentType]
+        (lambda: extrema(sig, candidates=1.5), r"extrema: candidates: must be a whole number"),  # pyright: ignore[reportArgumentType]
+        (lambda: gearte.smooth_peak(sig, width=math.inf), r"smooth_peak: width: must be a finite number"),
+        (lambda: gearte.smooth_peak(sig, width=1e-6, oversample=0), r"smooth_peak: oversample: must be ≥ 2"),
+        (lambda: gearte.synthetic_record(d, {}, key=0, revolutions=2, points_per_rev=64.9), r"points_per_rev: must be a whole number"),  # pyright: ignore[reportArgumentType]
+        (lambda: gearte.synthetic_record(d, {}, key=0, revolutions=2, points_per_rev=64, counts_per_rev=2.7), r"counts_per_rev: must be"),  # pyright: ignore[reportArgumentType]
+        (lambda: gearte.synthetic_record(d, {}, key=0, revolutions=2, points_per_rev=64, noise=-1e-5), r"noise: must be ≥ 0"),
+        (lambda: gearte.synthetic_record(d, {}, key=0, revolutions=math.nan, points_per_rev=64), r"revolutions: must be a finite number"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            call()

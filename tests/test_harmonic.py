@@ -373,6 +373,18 @@ def test_assembly_cancels_within_a_class():
     assert res.class_least["circular_spline"] == pytest.approx(k * 4.0, rel=1e-12)
     turned = (1.0 + res.turns["cs_b"]) - 0.2
     assert math.cos(2 * turned) == pytest.approx(-1.0, abs=1e-6)
+    # A key as every other solve takes it gives the same rule as its seed; a name where a list is due (it had been
+    # split into letters), a negative seed and counts below one are refused naming the argument.
+    again = optimise_assembly(drive, errs, adjustable=["cs_b"], starts=4, throw=False, key=jax.random.key(0))
+    assert float(again.after) == float(res.after)
+    for kwargs, match in (
+        (dict(adjustable="cs_b"), "adjustable: a list of source names"),
+        (dict(key=-1), r"seed must be a whole number in \[0, 2⁶³\)"),
+        (dict(max_steps=0), "max_steps: must be ≥ 1"),
+        (dict(starts=2.5), "starts: must be a whole number"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            optimise_assembly(drive, errs, **({"adjustable": ["cs_b"], "key": 0} | kwargs))
 
 
 def test_assembly_of_another_unit_traces_nothing():

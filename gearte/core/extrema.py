@@ -32,7 +32,7 @@ from jaxtyping import Array, Float
 from .precision import require_x64
 from .signal import TESignal, evaluate
 from .units import TWO_PI as _TWO_PI
-from .validate import as_int
+from .validate import as_float, as_int, is_traced
 
 
 class Extrema(eqx.Module):
@@ -366,10 +366,8 @@ def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 2, newt
     **Returns:** an `Extrema` (rad; input angles in rad).
     """
     require_x64()
-    if oversample < 8:
-        raise ValueError(f"extrema: oversample must be ≥ 8 (got {oversample}); the candidate ranking needs it")
-    if candidates < 1:
-        raise ValueError(f"extrema: candidates must be ≥ 1 (got {candidates})")
+    oversample = as_int("extrema: oversample", oversample, minimum=8)  # the candidate ranking needs 8 points per period
+    candidates = as_int("extrema: candidates", candidates, minimum=1)
     newton_steps = as_int("extrema: newton_steps", newton_steps, minimum=0)
     f0 = float(signal.fundamental)
     if not signal.orders:
@@ -441,12 +439,9 @@ def smooth_peak(signal: TESignal, *, width: float | Float[Array, ""], oversample
       where it is a number).
     - `oversample`: grid points per period of the highest order.
     """
-    try:
-        refused = not width > 0
-    except jax.errors.TracerBoolConversionError:  # a traced width: the caller's to check
-        refused = False
-    if refused:
-        raise ValueError(f"smooth_peak: width must be > 0 rad, got {width}")
+    if not isinstance(width, jax.Array) or not is_traced(width):  # a traced width: the caller's to check
+        as_float("smooth_peak: width", width, positive=True, hint="rad")
+    oversample = as_int("smooth_peak: oversample", oversample, minimum=2)
     require_x64()
     if not signal.orders:
         return width * jnp.logaddexp(signal.offset / width, -signal.offset / width)

@@ -7,8 +7,10 @@ from collections.abc import Mapping
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from jax.core import Tracer
+from jaxtyping import PRNGKeyArray
 
 
 def as_float(name: str, value, *, positive: bool = False, nonnegative: bool = False, hint: str = "") -> float:
@@ -82,3 +84,14 @@ def check_option(
     else:
         hint = ""
     raise ValueError(f"{name}: {what} {names}, got {value!r}{hint}")
+
+
+def as_key(key: int | PRNGKeyArray) -> PRNGKeyArray:
+    """A `jax.random` key from an integer seed or a key."""
+    if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+        if not 0 <= int(key) < 2**63:
+            raise ValueError(f"seed must be a whole number in [0, 2⁶³), got {key}")
+        return jax.random.key(int(key))
+    if isinstance(key, jax.Array) and jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        return key
+    raise ValueError(f"key: expected an integer seed or a jax.random.key(...), got {key!r}")

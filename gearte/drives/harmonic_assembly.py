@@ -21,13 +21,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array
+from jaxtyping import Array, PRNGKeyArray
 
 from ..core.extrema import _basis, _grid_values, grid_size
 from ..core.precision import require_x64
 from ..core.programs import kept_jit
 from ..core.signal import to_signal
 from ..core.solution import RESULTS, check
+from ..core.validate import as_int, as_key
 from .harmonic_estimate import class_phasors, source_phasors
 from .protocol import Eccentricity
 
@@ -128,6 +129,8 @@ def _solve_all(
 def check_adjustable(drive: HarmonicDrive, adjustable: Sequence[str]) -> list[str]:
     """The adjustable sources as a list, checked: sources of the drive, unique, none of the tooth class."""
     names = [s.name for s in drive.sources]
+    if isinstance(adjustable, str) or not isinstance(adjustable, Sequence):
+        raise ValueError(f"adjustable: a list of source names, e.g. [{names[0]!r}]; got {adjustable!r}")
     adjustable = list(adjustable)
     if not adjustable:
         raise ValueError("adjustable: name at least one source whose phase can be set at assembly")
@@ -149,7 +152,7 @@ def optimise_assembly(
     *,
     adjustable: Sequence[str],
     starts: int = 32,
-    key: int,
+    key: int | PRNGKeyArray,
     max_steps: int = 256,
     throw: bool = True,
 ) -> AssemblyResult:
@@ -169,7 +172,8 @@ def optimise_assembly(
     - `errors`: the unit's errors (magnitudes µm, phases rad).
     - `adjustable`: names of the sources whose angle Θ can be chosen (not tooth-class ones).
     - `starts`: random starting points.
-    - `key`: the seed (an integer) of the random starting points (required, as PRNG keys always are).
+    - `key`: a seed (an integer ≥ 0) or a `jax.random.key` for the random starting points (required, as PRNG keys always
+      are).
     - `max_steps`: BFGS steps per start.
     - `throw`: raise if the best start did not converge (else check `result`); a solve whose
       best start converged but some others did not is reported as `some_starts_failed`, not raised.
@@ -178,8 +182,9 @@ def optimise_assembly(
     """
     require_x64()
     adjustable = check_adjustable(drive, adjustable)
-    if isinstance(starts, bool) or not isinstance(starts, int) or starts < 1:
-        raise ValueError(f"starts: must be a whole number ≥ 1, got {starts!r}")
+    starts = as_int("starts", starts, minimum=1)
+    max_steps = as_int("max_steps", max_steps, minimum=1)
+    rng = as_key(key)
     base = drive.checked(errors)
     comp0 = drive.components(base, tooth=False)
     sig0 = to_signal(comp0)
@@ -188,7 +193,7 @@ def optimise_assembly(
     scale = float(jnp.sum(comp0.amplitude * comp0.gain)) or 1.0
     width = 1e-3 * scale
 
-    y0 = jax.random.uniform(jax.random.key(key), (starts, len(adjustable)), minval=0.0, maxval=2 * math.pi)
+    y0 = jax.random.uniform(rng, (starts, len(adjustable)), minval=0.0, maxval=2 * math.pi)
     y0 = jnp.concatenate([jnp.zeros((1, len(adjustable))), y0], axis=0)
     # The unit's scale enters as arrays (the smoothing width and the solver's atol), so that other units of the
     # same drive and shapes reuse the compiled solve.

@@ -268,10 +268,10 @@ class RVKHV(AbstractGridDrive):
         if self.discs > 2:
             raise ValueError(f"discs: give 2 discs (eccentrics 180° apart) or 1 (for checks), got {self.discs}")
         rc = as_float("crank_circle_radius", crank_circle_radius, positive=True)
-        if not rc + eccentricity < pin_circle_radius - pin_radius:
+        a, R, r = float(self.stage.eccentricity), float(self.stage.pin_circle_radius), float(self.stage.pin_radius)
+        if not rc + a < R - r:
             raise ValueError(
-                f"crank_circle_radius: the cranks (r_c = {rc:g} mm) must sit inside the pin circle (R − r − a = "
-                f"{pin_circle_radius - pin_radius - eccentricity:g} mm)"
+                f"crank_circle_radius: the cranks (r_c = {rc:g} mm) must sit inside the pin circle (R − r − a = {R - r - a:g} mm)"
             )
         pa = as_float("pressure_angle", pressure_angle, positive=True)
         if not pa < math.pi / 4:

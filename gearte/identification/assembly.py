@@ -37,9 +37,10 @@ import numpy as np
 from jaxtyping import Array, PRNGKeyArray
 from scipy.optimize import linear_sum_assignment
 
-from ..core.metrics import AbstractMetric, Peak
+from ..core.metrics import AbstractMetric, Peak, PeakToPeak
 from ..core.signal import evaluate
 from ..core.units import TWO_PI
+from ..core.validate import as_int
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity, zero_signal
 from ..optimise.allocation_measured import MeasuredAllocation, allocate_measured
 from ..studies.montecarlo import as_key
@@ -212,6 +213,10 @@ def assemble_batch(
         batches = 0
     if isinstance(random_batches, bool) or batches < 1:
         raise ValueError(f"random_batches: the comparison needs at least one random assembly (a whole number ≥ 1), got {random_batches!r}")
+    rounds = as_int("rounds", rounds, minimum=0)  # 0: the start assignment, then the swaps
+    candidates = as_int("candidates", candidates, minimum=1)
+    if type(metric) not in (Peak, PeakToPeak):
+        raise ValueError(f"metric: gearte.Peak() or gearte.PeakToPeak() (an instance), got {metric!r}")
     if not parts:
         raise ValueError("parts: give at least one part type (source name → Eccentricity of the measured parts)")
     counts, n_drives = {}, None

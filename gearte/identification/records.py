@@ -36,7 +36,7 @@ from jaxtyping import PRNGKeyArray
 from ..core.records import Record
 from ..core.signal import evaluate
 from ..core.units import ARCMIN_PER_RAD, ARCSEC_PER_RAD, TWO_PI
-from ..core.validate import is_traced
+from ..core.validate import as_float, as_int, is_traced
 from ..drives.protocol import AbstractGridDrive, AbstractSinusoidalDrive, Eccentricity, Errors
 from ..studies.montecarlo import as_key
 
@@ -411,6 +411,9 @@ def synthetic_record(
     A grid drive's record lies on the angles of its `trace` (for `gearte.CycloidPin`: `analysis.sweep_points_per_pitch`
     per pin pitch over `analysis.sweep_revolutions`), the TE exact there; leave `revolutions` and `points_per_rev` out.
     """
+    noise = as_float("synthetic_record: noise", noise, nonnegative=True, hint="rad")
+    if counts_per_rev is not None:
+        counts_per_rev = as_int("synthetic_record: counts_per_rev", counts_per_rev, minimum=1)
     if isinstance(drive, AbstractGridDrive):
         if revolutions is not None or points_per_rev is not None:
             raise ValueError(
@@ -427,7 +430,9 @@ def synthetic_record(
         raise ValueError("synthetic_record: needs a sinusoidal drive (planetary_2kh, harmonic, explicit) or a grid drive (cycloid_pin)")
     if revolutions is None or points_per_rev is None:
         raise ValueError("synthetic_record: give revolutions and points_per_rev for a sinusoidal drive's record")
-    n = int(round(float(revolutions) * int(points_per_rev)))
+    revolutions = as_float("synthetic_record: revolutions", revolutions, positive=True)
+    points_per_rev = as_int("synthetic_record: points_per_rev", points_per_rev, minimum=1)
+    n = int(round(revolutions * points_per_rev))
     if n < 16:
         raise ValueError(f"synthetic_record: {revolutions} revolutions at {points_per_rev} points per revolution is under 16 samples")
     theta = TWO_PI / int(points_per_rev) * np.arange(n)

@@ -30,23 +30,12 @@ from ..core.metrics import AbstractMetric, check_offered
 from ..core.precision import require_x64
 from ..core.programs import kept_program
 from ..core.schema import MAX_SAMPLES
-from ..core.validate import is_traced
+from ..core.validate import as_key, is_traced
 from ..drives.protocol import AbstractDrive, AbstractSinusoidalDrive
 from .errors import ErrorModel, check_drive_model
 
 PERCENTILES = (1.0, 5.0, 50.0, 95.0, 99.0, 99.73)
 DEFAULT_SAMPLES = 50_000
-
-
-def as_key(key: int | PRNGKeyArray) -> PRNGKeyArray:
-    """A `jax.random` key from an integer seed or a key."""
-    if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
-        if not 0 <= int(key) < 2**63:
-            raise ValueError(f"seed must be a whole number in [0, 2⁶³), got {key}")
-        return jax.random.key(int(key))
-    if isinstance(key, jax.Array) and jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        return key
-    raise ValueError(f"key: expected an integer seed or a jax.random.key(...), got {key!r}")
 
 
 class TEStudy(eqx.Module):
@@ -74,6 +63,8 @@ class TEStudy(eqx.Module):
         offered = drive.metrics
         if metric is None:
             metric = next(iter(offered.values()))
+        if isinstance(metric, tuple) and not metric:
+            raise ValueError(f"metric: give a metric of the drive or a tuple of them, e.g. {next(iter(offered.values()))!r}; got ()")
         for m in metric if isinstance(metric, tuple) else (metric,):
             check_offered(m, drive)
         self.drive, self.errors, self.metric = drive, errors, metric
@@ -247,6 +238,10 @@ def monte_carlo(
     returns a pytree), or None with ``keep=False``.
     """
     require_x64()
+    if not callable(fn):
+        raise ValueError(f"fn: one sample as a function of its key, such as gearte.TEStudy(drive, errors); got {type(fn).__name__}")
+    if on_chunk is not None and not callable(on_chunk):
+        raise ValueError(f"on_chunk: a function on_chunk(start, values), got {on_chunk!r}")
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
         raise ValueError(f"n_samples: must be a whole number ≥ 1, got {n_samples!r}")
     if n_samples > MAX_SAMPLES:
@@ -262,6 +257,8 @@ def monte_carlo(
         per = int(sizer()) if callable(sizer) else 0  # pyright: ignore[reportArgumentType]
         block_size = default_block_size(per) if per else 256
     block = int(block_size)
+    if block > MAX_SAMPLES:
+        raise ValueError(f"block_size: at most 2³² − 1 samples, got {block}")
     mesh = sample_mesh() if mesh is None else mesh
     if mesh.axis_names != ("samples",):
         raise ValueError(f"mesh: expected one axis named 'samples', got {mesh.axis_names}")
