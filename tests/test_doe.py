@@ -271,6 +271,8 @@ def test_interior_optimum_is_the_stationary_point():
     assert ca.nature == "minimum"
     np.testing.assert_allclose(ca.eigenvalues, np.linalg.eigvalsh(B), rtol=1e-10)
     np.testing.assert_allclose(ca.stationary_coded, xs, rtol=1e-10)
+    # The surface's value there, evaluated from the fitted polynomial itself (the summary's stationary value).
+    assert ca.stationary_value == pytest.approx(quad_matrix(xs[None])[0] @ eta, rel=1e-12)
     o = s.optimum("minimise")
     assert o.interior and o.at_bounds == ()
     np.testing.assert_allclose(o.natural, xs, rtol=1e-10)

@@ -558,6 +558,38 @@ def test_best_planet_assembly_is_a_coordinate_optimum_of_the_units_te():
             assert pp(other) >= float(out.value) * (1 - 1e-9), (i, k)
 
 
+def test_best_planet_assembly_never_takes_a_failed_solve_and_says_where_one_failed(monkeypatch):
+    """A position whose equilibrium solves failed is never chosen, however small its metric (a failed solve's TE is
+    not the unit's); a failed solve at the start makes the result `contact_not_converged`; a start position that is
+    not a whole tooth in 0 … z_g − 1 is refused. The solves are stood in for: planet 0's position 5 "fails" with the
+    smallest value, position 3 succeeds with the next smallest."""
+    from gearte.optimise import rv_assembly
+
+    d = make(z_sun=12, z_planet=12, points=16)
+    for bad in ([0, 0, d.z_planet], [0.7, 1.0, 0], [0, 0]):
+        with pytest.raises(ValueError, match=r"start: give one whole-tooth position 0 … 11 per planet \(3\)"):
+            rv_assembly.best_planet_assembly(d, {}, start=bad)
+    start_ok = [True]
+
+    def evaluate(drive, err, teeth, metric):
+        return jnp.asarray(10.0 - float(np.asarray(teeth)[0] == 3)), jnp.asarray(start_ok[0] or bool(np.asarray(teeth)[0] == 3))
+
+    def candidates(drive, err, planet, teeth, metric):
+        values = np.full(drive.z_planet, 10.0)
+        ok = np.ones(drive.z_planet, dtype=bool)
+        if planet == 0:
+            values[5], ok[5], values[3] = 1.0, False, 9.0
+        return jnp.asarray(values), jnp.asarray(ok)
+
+    monkeypatch.setattr(rv_assembly, "_evaluate", evaluate)
+    monkeypatch.setattr(rv_assembly, "_candidates", candidates)
+    out = rv_assembly.best_planet_assembly(d, {})
+    assert list(np.asarray(out.teeth)) == [3, 0, 0] and bool(out.result == RESULTS.successful)
+    start_ok[0] = False
+    out = rv_assembly.best_planet_assembly(d, {}, throw=False)
+    assert bool(out.result == RESULTS.contact_not_converged)
+
+
 @pytest.mark.parametrize("op, fill", [(jnp.sum, 0.0), (jnp.min, np.inf), (jnp.max, -np.inf)])
 @pytest.mark.parametrize("n", [1, 31, 32, 33, 64, 86, 726])
 def test_reductions_written_in_slices_equal_the_plain_ones(op, fill, n):

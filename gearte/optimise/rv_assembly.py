@@ -107,8 +107,9 @@ def best_planet_assembly(
     check_offered(metric, drive)
     rounds_max = as_int("max_rounds", max_rounds, minimum=1)
     n, zg = drive.cranks, drive.z_planet
-    teeth = np.zeros(n, dtype=int) if start is None else np.asarray(start, dtype=int).reshape(-1)
-    if teeth.shape != (n,) or np.any(teeth < 0) or np.any(teeth >= zg):
+    given = np.zeros(n) if start is None else np.asarray(start, dtype=float).reshape(-1)
+    teeth = given.astype(int)
+    if given.shape != (n,) or np.any(given != teeth) or np.any(teeth < 0) or np.any(teeth >= zg):
         raise ValueError(f"start: give one whole-tooth position 0 … {zg - 1} per planet ({n}), got {start!r}")
     err = drive.errors(errors)
     v0, ok0 = _evaluate(drive, err, jnp.asarray(teeth), metric)
