@@ -132,6 +132,24 @@ def test_single_source_budget_matches_the_closed_form():
     assert r.verified_yield >= 0.99
 
 
+def test_the_binding_constraint_of_several_sets_the_scale_in_closed_form():
+    """Two constraints on one Rayleigh source (peak TE = g·T·u, as above): 99 % within 20 g and 50 % within 5 g. Each
+    alone needs T = spec / (g q(u)); together the smaller, the median's here, and the other is then met with room."""
+    d = ExplicitDrive([ExplicitTerm("a", 1)], gain=GAIN)
+    model = gearte.ErrorModel({"a": gearte.ErrorSource(gearte.Rayleigh(5.0, truncate_at=10.0), gearte.UniformPhase())}, d.error_sources)
+    peak = gearte.Peak()
+    constraints = [gearte.Constraint(peak, 20 * GAIN, gearte.Yield(0.99)), gearte.Constraint(peak, 5 * GAIN, gearte.Yield(0.5))]
+    p = budget_problem(d, model, costs={"a": gearte.Reciprocal(0.0, 1.0)}, nominal={"a": 10.0}, constraints=constraints)
+    law = sps.rayleigh(scale=0.5)
+    u = lambda level: law.ppf(level * law.cdf(1.0))  # quantile of u = magnitude / T, truncated at 1
+    alone = {0.99: 20.0 / u(0.99), 0.5: 5.0 / u(0.5)}
+    assert alone[0.5] < 0.8 * alone[0.99]
+    b = uniform_scaling(p, key=5, n_check=40_000)
+    assert b.tolerances["a"] == pytest.approx(alone[0.5], rel=0.02)
+    se = lambda q: 3 * math.sqrt(q * (1 - q) / 40_000)
+    assert b.verified_yields[1] >= 0.5 - se(0.5) and b.verified_yields[0] >= 0.999
+
+
 def test_optimised_budget_is_cheaper_and_meets_the_yield_on_a_fresh_seed():
     p = two_source_problem()
     r = optimise_budget(p, key=3, n_samples=2000, n_check=40_000)
