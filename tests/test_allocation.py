@@ -213,6 +213,9 @@ def test_rule_problem_validation():
         rule_problem(d, model, adjust={"b": "relative"}, datum="a", tolerances={"a": 1})
     with pytest.raises(ValueError, match="≥ 0"):
         rule_problem(d, model, adjust={"b": "relative"}, datum="a", tolerances={"a": 1, "b": -1})
+    # A zero tolerance is a source left out of the worst case, not an error: the worst case is then a's alone.
+    p0 = rule_problem(d, model, adjust={"b": "relative"}, datum="a", tolerances={"a": 1, "b": 0})
+    assert float(worst_case(p0, [0.3])) == pytest.approx(GAIN, rel=1e-9)
     with pytest.raises(ValueError, match="adjust: a mapping"):
         rule_problem(d, model, adjust=["b"], datum="a", tolerances={"a": 1, "b": 1})  # pyright: ignore[reportArgumentType]
     with pytest.raises(ValueError, match="objective"):

@@ -149,6 +149,33 @@ def test_rule_bound_phases_are_not_inputs_and_follow_their_datum():
     assert set(r.sources) == set(s.drive.error_sources)
 
 
+def test_a_row_of_uniforms_becomes_the_errors_the_rules_and_the_budget_say():
+    """The map from a row of uniforms to errors, by hand: a phase input u is 2π u; a relative rule adds its offset to
+    its datum's phase; a band (a deviation's uniform law about a centre) scaled by a budget keeps its centre."""
+    from gearte.studies.sensitivity import _plan
+
+    st = study(
+        [("a", 1, 0.0), ("b", 1, 0.0)],
+        {"a": gearte.ErrorSource(2.0, gearte.UniformPhase()), "b": gearte.ErrorSource(1.0, gearte.RelativePhase("a", 0.4))},
+    )
+    labels, _, _, plan = _plan(st.drive, st.errors, {"a": 1.0, "b": 1.0}, gearte.Peak())
+    assert labels == ("a.phase",)
+    e = plan.errors(jax.numpy.asarray([0.25]))
+    np.testing.assert_allclose(np.ravel(e["a"].phase), math.pi / 2, rtol=1e-15)
+    np.testing.assert_allclose(np.ravel(e["b"].phase), math.pi / 2 + 0.4, rtol=1e-15)
+    drive = load_study(ROOT / "examples" / "cycloid_yao2001_modified.toml").drive
+    low, high = -58.5, -25.0  # µm, the example's pin-radius range, here as a band about its middle
+    band = gearte.Uniform.centred((high - low) / 2, (low + high) / 2)
+    sources = {n: gearte.ErrorSource(band if n == "pin_radius" else 0.0) for n in drive.error_sources}
+    model = gearte.ErrorModel(sources, drive.error_sources)
+    labels, _, _, plan = _plan(drive, model, {n: 0.5 if n == "pin_radius" else 1.0 for n in model.specs}, gearte.LostMotion())
+    u = np.full(len(labels), 0.5)
+    u[labels.index("pin_radius.value")] = 0.9
+    value = float(np.ravel(plan.errors(jax.numpy.asarray(u))["pin_radius"])[0])
+    centre = (low + high) / 2
+    assert value == pytest.approx(centre + 0.5 * (low + 0.9 * (high - low) - centre), rel=1e-12)
+
+
 def test_reproducible_from_the_seed():
     st = study(
         [("a", 1, 0.0), ("b", 2, 0.0)],
