@@ -343,6 +343,7 @@ def test_counts_and_options_of_the_library_functions_are_checked():
         (lambda: gearte.monte_carlo(gearte.TEStudy(d, model), key=0, n_samples=4, on_chunk=1), r"on_chunk: a function"),  # pyright: ignore[reportArgumentType]
         (lambda: extrema(sig, oversample=8.5), r"extrema: oversample: must be a whole number, got 8.5"),  # pyright: ignore[reportArgumentType]
         (lambda: extrema(sig, candidates=1.5), r"extrema: candidates: must be a whole number"),  # pyright: ignore[reportArgumentType]
+        (lambda: extrema_two_scale(sig, candidates=0), r"extrema_two_scale: candidates: must be ≥ 1, got 0"),
         (lambda: gearte.smooth_peak(sig, width=math.inf), r"smooth_peak: width: must be a finite number"),
         (lambda: gearte.smooth_peak(sig, width=1e-6, oversample=0), r"smooth_peak: oversample: must be ≥ 2"),
         (lambda: gearte.synthetic_record(d, {}, key=0, revolutions=2, points_per_rev=64.9), r"points_per_rev: must be a whole number"),  # pyright: ignore[reportArgumentType]

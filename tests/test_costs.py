@@ -106,6 +106,13 @@ def test_grade_table_hits_the_table_at_whole_grades():
     np.testing.assert_allclose(m.grade(T_at(6.3)), 6.3, rtol=1e-12)
 
 
+def test_a_grade_as_dear_as_the_next_finer_one_is_allowed():
+    # A coarser grade must not cost more; the same cost is a shop's price list, and the curve is flat between them.
+    m = gearte.GradeTable({5: 2.0, 6: 2.0, 7: 1.0}, **GEAR)
+    for q, c in ((5, 2.0), (5.5, 2.0), (6, 2.0), (7, 1.0)):
+        np.testing.assert_allclose(m(T_at(q)), c, rtol=1e-12)
+
+
 def test_grade_table_interpolation_by_hand():
     # {4: 10, 5: 4, 7: 2}: y = ln c = [2.3025851, 1.3862944, 0.6931472] at grades [4, 5, 7], h = [1, 2]
     # secants δ0 = (1.3862944 − 2.3025851)/1 = −0.9162907, δ1 = (0.6931472 − 1.3862944)/2 = −0.3465736
@@ -203,7 +210,8 @@ def test_bad_tolerances(model, T):
 
 def test_bad_tolerance_under_jit_raises_unless_throw_is_false():
     m = gearte.Reciprocal(1.0, 2.0)
-    with pytest.raises(Exception, match="tolerance T must be finite and > 0"):
-        jax.jit(lambda t: m(t))(jnp.asarray(-1.0)).block_until_ready()
+    for bad in (-1.0, 0.0):  # zero too: its cost would be infinite
+        with pytest.raises(Exception, match="tolerance T must be finite and > 0"):
+            jax.jit(lambda t: m(t))(jnp.asarray(bad)).block_until_ready()
     c = jax.jit(lambda t: m(t, throw=False))(jnp.asarray(-1.0))
     assert float(c) == -1.0  # 1 + 2/(−1): no check, the formula as written

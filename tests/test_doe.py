@@ -152,6 +152,8 @@ def test_latin_hypercube_one_run_per_stratum(centred):
 def test_sobol_balance_on_powers_of_two(scramble):
     m = 5
     p = gearte.SobolSequence(2**m, scramble=scramble, seed=3).points(2)
+    if not scramble:  # the plain sequence is not random: it needs no seed, and is the same with any
+        np.testing.assert_array_equal(gearte.SobolSequence(2**m, scramble=False).points(2), p)
     u = (p + 1) / 2
     assert p.shape == (32, 2) and np.all((u >= 0) & (u < 1))
     # A two-dimensional Sobol' sequence is a (0, m, 2)-net: every 2^a × 2^(m−a) box holds one point.

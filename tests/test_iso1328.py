@@ -291,6 +291,9 @@ def test_teeth_in_range_and_1995_has_no_teeth_range():
     a = gearte.iso1328_tolerances(standard=S2013, grade=6, teeth=25, **GEAR_2013)
     assert a == gearte.iso1328_tolerances(standard=S2013, grade=6, **GEAR_2013)
     gearte.iso1328_tolerances(standard=S1995, grade=6, teeth=3, **GEAR_1995)
+    gearte.iso1328_tolerances(standard=S1995, grade=6, teeth=1, **GEAR_1995)
+    with pytest.raises(ValueError, match=r"teeth: must be ≥ 1, got 0"):
+        gearte.iso1328_tolerances(standard=S1995, grade=6, teeth=0, **GEAR_1995)
 
 
 def test_grade_range():

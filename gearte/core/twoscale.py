@@ -137,8 +137,7 @@ def extrema_two_scale(signal: TESignal, *, fast_order: int | None = None, candid
 
     **Returns:** a `TwoScaleExtrema` (rad; input angles in rad) with certified error bounds.
     """
-    if candidates < 1:
-        raise ValueError(f"extrema_two_scale: candidates must be ≥ 1 (got {candidates})")
+    candidates = as_int("extrema_two_scale: candidates", candidates, minimum=1)
     newton_steps = as_int("extrema_two_scale: newton_steps", newton_steps, minimum=0)
     if not signal.orders:
         zero = jnp.zeros_like(signal.offset)
