@@ -355,3 +355,30 @@ def test_a_second_pathwise_study_of_the_same_drive_traces_nothing():
     assert out.mean == pytest.approx(mean, rel=1e-12)
     rows = {r.label: r.value for r in gradient_rows(out, m)}
     assert 7.0 * rows["a.scale"] + 3.0 * rows["b.scale"] == pytest.approx(mean, rel=1e-9)
+
+
+def test_the_pathwise_summary_is_in_the_report_units_by_hand():
+    """Two fixed phasors of one frequency, 2 µm at phase 0 and 1 µm at phase β = 1 rad: the peak is g |2 + e^{iβ}|,
+    so d peak/d(magnitude of a) = g (2 + cos β)/|·| (rad per µm, reported in ″ per µm) and d peak/dβ =
+    −2 g sin β/|·| (rad per rad: the same number in ″ per ″). The smooth peak the derivatives are taken of is within
+    its width of the exact one."""
+    from gearte.core.units import ARCSEC_PER_RAD
+    from gearte.studies.sensitivity_pathwise import pathwise_summary
+
+    st = study(
+        [("a", 1, 0.0), ("b", 1, 0.0)],
+        {"a": gearte.ErrorSource(2.0, gearte.FixedPhase(0.0)), "b": gearte.ErrorSource(1.0, gearte.FixedPhase(1.0))},
+    )
+    peak = gearte.Peak()
+    out = gearte.pathwise_sensitivities(st.drive, st.errors, peak, key=0, n_samples=2, chunk=2)
+    entry = pathwise_summary(out, st.errors, {"peak": peak}, unit="arcsec")["peak"]
+    r = abs(2 + np.exp(1j))
+    assert entry["unit"] == "arcsec" and entry["mean"] == pytest.approx(GAIN * r * ARCSEC_PER_RAD, rel=1e-3)
+    rows = entry["derivatives"]
+    assert rows["a.value"]["per"] == "µm" and rows["b.phase.value"]["per"] == "″"
+    assert rows["a.value"]["value"] == pytest.approx(GAIN * (2 + math.cos(1.0)) / r * ARCSEC_PER_RAD, rel=1e-3)
+    assert rows["b.phase.value"]["value"] == pytest.approx(-2 * GAIN * math.sin(1.0) / r, rel=1e-3)
+    # A law with one parameter at zero (a magnitude uniform from 0) is a source like any other, not one left out.
+    st = study([("a", 1, 0.0)], {"a": gearte.ErrorSource(gearte.Uniform(0.0, 10.0), gearte.UniformPhase())})
+    out = gearte.pathwise_sensitivities(st.drive, st.errors, peak, key=0, n_samples=2, chunk=2)
+    assert {"a.low", "a.high"} <= set(pathwise_summary(out, st.errors, {"peak": peak})["peak"]["derivatives"])
