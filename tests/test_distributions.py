@@ -62,6 +62,22 @@ def test_signed_laws_for_deviations():
     np.testing.assert_allclose([float(gearte.Uniform.centred(2.0, 1.0).low), float(gearte.Uniform.centred(2.0, 1.0).high)], [-1.0, 3.0])
 
 
+def test_a_budget_scales_a_band_about_its_centre_and_a_range_about_zero():
+    """`scaled(f, about_centre=True)`, how a budget scales a deviation's law, by hand at the quartiles: a band
+    (Uniform.centred, a Normal) keeps its centre and scales its spread; a range [low, high] and a truncated normal
+    are scaled about 0 (low and high times f), as a magnitude is."""
+    u = np.asarray([0.25, 0.5, 0.75])
+    cases = (
+        (gearte.Uniform.centred(2.0, 3.0), 3.0 + 2.0 * 2.0 * (2 * u - 1)),  # 3 ± 4
+        (gearte.Normal(3.0, 1.0), 3.0 + 2.0 * sps.norm.ppf(u)),  # mean 3, std 2
+        (gearte.Uniform(1.0, 5.0), 2.0 + 8.0 * u),  # [2, 10]
+    )
+    for law, want in cases:
+        np.testing.assert_allclose(np.asarray(law.scaled(2.0, about_centre=True).ppf(jnp.asarray(u))), want, rtol=1e-12)
+    t = gearte.TruncatedNormal(5.0, 4.0, 0.0, 12.0).scaled(2.0, about_centre=True)
+    assert (float(t.mean), float(t.std), float(t.low), float(t.high)) == (10.0, 8.0, 0.0, 24.0)
+
+
 U = np.linspace(0.01, 0.99, 9)
 
 
