@@ -349,3 +349,20 @@ def test_best_start_prefers_a_converged_start_among_ties():
     assert best_start(jnp.array([2.0, 1.5, 3.0]), results) == 1
     none_ok = jax.tree.map(lambda *x: jnp.stack(x), stop, stop, stop)
     assert best_start(jnp.array([2.0, 1.0, 3.0]), none_ok) == 1
+
+
+def test_the_result_of_several_starts_is_the_best_ones_and_says_when_others_failed():
+    """`starts_result`: the count of converged starts, and the best start's own code where it failed; where it
+    converged but another did not, `some_starts_failed` (reported, never hidden as a success)."""
+    from gearte.optimise.allocation import starts_result
+
+    def batch(flags):  # the result codes of a vmapped solve over the starts
+        return jax.vmap(lambda ok: optx.RESULTS.where(ok, optx.RESULTS.successful, optx.RESULTS.max_steps_reached))(jnp.asarray(flags))
+
+    codes = batch([True, False, True])
+    n, r = starts_result(codes, 0)
+    assert n == 2 and r == gearte.RESULTS.some_starts_failed
+    n, r = starts_result(codes, 1)
+    assert n == 2 and r == gearte.RESULTS.max_steps_reached
+    n, r = starts_result(batch([True, True, True]), 2)
+    assert n == 3 and r == gearte.RESULTS.successful
