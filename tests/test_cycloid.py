@@ -621,7 +621,21 @@ def test_example_runs_and_writes_every_output(example_run):
     c = clearances(d, seed_errors(), d.pitch / 2)
     assert contact == int(c.contact_pin) + 1
     assert s["lost_motion_at_input_angle_arcmin"] == pytest.approx(float(c.lost_motion) * ARCMIN, rel=1e-12)
-    assert s["optimised_modification"]["best"]["feasible"]
+    opt = s["optimised_modification"]
+    assert opt["best"]["feasible"]
+    # Every row's wheel is the pin circle and pin modified (R_z = 195, r_z = 13.5 mm); a feasible row meets the
+    # constraints as the summary states them; the best is the feasible row with the most loaded pairs.
+    c = opt["constraints"]
+    for r in [opt["best"], opt["initial"], *opt["starts"]]:
+        assert r["wheel_pin_circle_radius_mm"] == pytest.approx(195.0 + r["shift_mm"], rel=1e-14)
+        assert r["wheel_pin_radius_mm"] == pytest.approx(13.5 + r["equidistant_mm"], rel=1e-14)
+        assert r["radial_clearance_mm"] == pytest.approx(r["equidistant_mm"] - r["shift_mm"], rel=1e-12)
+        if r["feasible"]:
+            assert c["lost_motion_min_arcmin"] - 1e-9 <= r["lost_motion_min_arcmin"]
+            assert r["lost_motion_max_arcmin"] <= c["lost_motion_max_arcmin"] * (1 + 1e-9)
+            assert r["radial_clearance_mm"] >= c["radial_clearance_min_mm"] - 1e-12
+    feasible = [r for r in opt["starts"] if r["feasible"]]
+    assert feasible and opt["best"]["loaded_pairs_mean"] >= max(r["loaded_pairs_mean"] for r in feasible) - 1e-9
     # The study metric's statistics are those of the Monte Carlo's lost motion.
     assert s["te"]["metric"] == "lost_motion" and s["te"]["mean"] == pytest.approx(
         s["monte_carlo"]["lost_motion_max_arcmin"]["mean"], rel=1e-12

@@ -66,9 +66,11 @@ def reassemble(
     for name in adjust:
         if name in combined:
             g = combined[name]
+            others = [m for m in g.members if m.split("[")[0] != name]
+            what = f"shares its line with {', '.join(others)}" if others else f"has its instances {', '.join(g.members)} on one line"
             raise ValueError(
-                f"adjust: {name!r} shares its line with {', '.join(m for m in g.members if m.split('[')[0] != name)}; the record gives "
-                f"only their combined phasor, so turning {name} alone cannot be predicted. {g.advice}"
+                f"adjust: {name!r} {what}; the record gives only their combined phasor, so turning {name} alone cannot be "
+                f"predicted. {g.advice}"
             )
     return allocate_measured(drive, solution.errors, adjust=adjust, key=key, metric=metric, starts=starts, throw=throw)
 

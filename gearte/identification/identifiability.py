@@ -115,6 +115,23 @@ def groups(instances, freqs, jac, offs, starts_of, kept, status, n_records, *, g
         labels = tuple(instances[i].label for i in order)
         others = [lab for lab in labels if lab != instances[rep].label]
         fr = freqs[rep]
+        # `identify` turns a source's every instance together (one angle per source and record): turns separate
+        # sources, never the instances of one source (planets' parts of one kind) from each other.
+        bases = sorted({lab.split("[")[0] for lab in labels})
+        rep_base = instances[rep].label.split("[")[0]
+        if len(bases) == 1:
+            separate = (
+                f"They are instances of one source, {rep_base}; identify's turns turn every instance of a source together, "
+                "which keeps their combination: separating them needs another measurement"
+            )
+        else:
+            separate = (
+                f"To separate them, turn one of the sources {', '.join(b for b in bases if b != rep_base)} by a known angle "
+                f"at re-assembly and record again; {len(bases)} records with independent turns separate the {len(bases)} "
+                "sources"
+                + (" (not the instances of one source from each other)" if len(bases) < len(labels) else "")
+                + " (identify(..., turns=[…]))"
+            )
         advice = (
             f"{', '.join(labels)} change the TE on the records' input angles only together (their Jacobian columns are "
             f"linearly dependent there): the records give one combination, carried by {instances[rep].label} with "
@@ -122,8 +139,7 @@ def groups(instances, freqs, jac, offs, starts_of, kept, status, n_records, *, g
             "another measurement"
             if grid
             else f"{', '.join(labels)} act on the same line{'s' if len(fr) > 1 else ''} ({', '.join(map(str, fr))} × input speed): one record gives their combined phasor, reported as "
-            f"{instances[rep].label}. To separate them, turn one of {', '.join(others)} by a known angle at re-assembly and "
-            f"record again; {len(labels)} records with independent turns separate all {len(labels)} (identify(..., turns=[…]))"
+            f"{instances[rep].label}. {separate}"
         )
         out.append(Group("combined", labels, instances[rep].label, fr, advice))
     if unseen:
