@@ -21,7 +21,7 @@ import jax.numpy as jnp
 from jaxtyping import PRNGKeyArray
 
 from ..drives.protocol import Eccentricity, SourceSpec
-from .laws import AbstractLaw, AbstractPhase, AbstractRule, AbstractValueLaw, Fixed, FixedPhase, RelativePhase
+from .laws import AbstractLaw, AbstractPhase, AbstractRule, AbstractValueLaw, Fixed, FixedPhase, RelativePhase, Sinusoid
 
 
 class ErrorSource(eqx.Module):
@@ -100,8 +100,8 @@ class ErrorModel(eqx.Module):
             if not isinstance(src, ErrorSource):
                 raise ValueError(f"error source {n!r}: expected an ErrorSource, got {type(src).__name__}")
             # A phase law draws a deviation that is itself an angle (a cycloid set-up phase), never a magnitude; a
-            # Sinusoid draws a pattern of deviations over tooth spaces or pins.
-            if spec.kind == "eccentricity" and not isinstance(src.magnitude, AbstractValueLaw):
+            # Sinusoid draws a signed pattern of deviations over tooth spaces or pins. (A law of the user's own may be.)
+            if spec.kind == "eccentricity" and isinstance(src.magnitude, (AbstractPhase, Sinusoid)):
                 raise ValueError(
                     f"error source {n!r}: the magnitude of an eccentricity is drawn by a value law (Fixed, Uniform, "
                     f"Normal, TruncatedNormal, Rayleigh), not {type(src.magnitude).__name__}"
