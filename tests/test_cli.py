@@ -78,6 +78,8 @@ def test_examples_run_and_write_every_output(path, tmp_path):
     report = (out / "report.md").read_text()
     for needed in ("seed 3", "600", "float64", "uniform on [0, 2π)", "hyper-period"):
         assert needed in report, needed
+    # 600 × 0.27 % = 1.6 samples beyond P99.73 (and 6 beyond P99): the first is flagged as no estimate of the tail.
+    assert "P99.73 from 600 samples: fewer than 3 samples lie beyond it" in report
     if "eq9" not in path.stem:
         assert "single path" in report  # the coupling assumption is stated
     if "rayleigh" in path.stem:

@@ -11,6 +11,19 @@ from ..studies.montecarlo import PERCENTILES
 from .config import Study
 
 
+
+def _thin_tails(n: int) -> str:
+    """A warning for the percentiles that fewer than 3 samples lie beyond (either side), with `n` samples: there a
+    percentile is an interpolation between the few extreme samples, not an estimate of the batch's."""
+    thin = [p for p in PERCENTILES if n * min(p, 100.0 - p) / 100.0 < 3.0]
+    if not thin:
+        return ""
+    return (
+        f" {', '.join(f'P{p:g}' for p in thin)} from {n:,} samples: fewer than 3 samples lie beyond "
+        f"{'it' if len(thin) == 1 else 'each'}, so {'it is' if len(thin) == 1 else 'they are'} an interpolation between the "
+        "extreme samples, not an estimate of the batch's tail (run more samples)."
+    )
+
 def _fmt(x: float) -> str:
     return f"{x:.2f}"
 
@@ -42,7 +55,7 @@ def report(study: Study, s: dict, errs: dict, tr) -> str:
         + " | ".join(_fmt(te["percentiles"][f"{p:g}"]) for p in PERCENTILES)
         + " |",
         "",
-        "std is the sample standard deviation (n − 1); percentiles by linear interpolation.",
+        "std is the sample standard deviation (n − 1); percentiles by linear interpolation." + _thin_tails(te["n"]),
         "",
         "![histogram](histogram.png)",
         "",
