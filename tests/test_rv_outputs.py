@@ -245,6 +245,19 @@ def test_study_outputs_draw_every_figure_the_report_shows(drive, metric, tmp_pat
     json.dumps(out.summary)  # plain JSON types only
     assert out.summary["reference_unit"]["index"] == typical_index(ctx)
     assert out.summary["monte_carlo"]["solves"]["successful_share"] == 1.0
+    # The typical unit on the study's grid is its own Monte Carlo sample: here the reference grid is the same grid,
+    # so the two agree and the study grid misses nothing (the report says nothing of it).
+    ref = out.summary["reference_unit"]
+    g = ref["on_study_grid"]
+    assert g["te_p2p_forward_arcsec"] == pytest.approx(ref["te_forward_arcsec"]["p2p"], rel=1e-9)
+    assert g["te_p2p_reverse_arcsec"] == pytest.approx(ref["te_reverse_arcsec"]["p2p"], rel=1e-9)
+    assert g["lost_motion_max_arcmin"] == pytest.approx(ref["lost_motion_arcmin"]["max"], rel=1e-9)
+    assert g["understated_by"] == pytest.approx(0.0, abs=1e-9) and "Monte Carlo's grid" not in "\n".join(out.report)
+    coarse = ref | {
+        "on_study_grid": g | {"grid_points": 12, "te_p2p_forward_arcsec": 0.9 * g["te_p2p_forward_arcsec"], "understated_by": 0.1}
+    }
+    note = "\n".join(report(drive, out.summary | {"reference_unit": coarse}, metric=metric.name))
+    assert "On the Monte Carlo's grid of 12 output angles" in note and "misses up to 10.0 %" in note
     for f in out.figures:
         _draw(f, tmp_path)
     text = "\n".join(out.report)

@@ -11,7 +11,6 @@ from ..studies.montecarlo import PERCENTILES
 from .config import Study
 
 
-
 def _thin_tails(n: int) -> str:
     """A warning for the percentiles that fewer than 3 samples lie beyond (either side), with `n` samples: there a
     percentile is an interpolation between the few extreme samples, not an estimate of the batch's."""
@@ -23,6 +22,7 @@ def _thin_tails(n: int) -> str:
         f"{'it' if len(thin) == 1 else 'each'}, so {'it is' if len(thin) == 1 else 'they are'} an interpolation between the "
         "extreme samples, not an estimate of the batch's tail (run more samples)."
     )
+
 
 def _fmt(x: float) -> str:
     return f"{x:.2f}"
