@@ -422,6 +422,7 @@ def test_budget_report_gives_angular_tolerances_in_arcseconds():
         "solver_result": "successful",
         "tolerances_um": {"pin_radius": 1.2, "disc_indexing": rad},
         "nominal_tolerances_um": {"pin_radius": 1.0, "disc_indexing": math.radians(10.0 / 3600)},
+        "maximum_tolerances_um": {"pin_radius": 10.0, "disc_indexing": math.radians(100.0 / 3600)},
         "baseline_tolerances_um": {"pin_radius": 1.1, "disc_indexing": 1.1 * math.radians(10.0 / 3600)},
         "grades": {},
         "cost_models": {n: gearte.Reciprocal(0.0, 1.0).describe() for n in names},
@@ -437,7 +438,13 @@ def test_budget_report_gives_angular_tolerances_in_arcseconds():
     assert "| 10″ | 12″ | 11″ |" in row and "T in rad" in row
     assert "| pin_radius | 1 | 1.20 | 1.10 |" in text and "T in µm" in text
     assert "± 0.00164, one binomial standard error at a yield of 0.9973 on 1,000 fresh samples" in text  # √(0.9973 · 0.0027 / 1000)
-    assert "Below its target" not in text
+    assert "Below its target" not in text and "At their maximum" not in text
+    # A tolerance at its maximum (the constraints do not limit it) is marked and said so.
+    capped = "\n".join(_report(study, {"budget": b | {"tolerances_um": {"pin_radius": 10.0, "disc_indexing": rad}}}))
+    assert (
+        "| pin_radius | 1 | 10.00 (maximum) | 1.10 |" in capped
+        and "**At their maximum:** pin_radius: the constraints do not limit it" in capped
+    )
     # A verified yield under the target is said so, with how many standard errors that is.
     low = "\n".join(_report(study, {"budget": b | {"verified_yield": 0.995}}))
     assert "**Below its target on the fresh sample:** the yield of the metric is 0.9950 against 0.9973, 1.4 binomial" in low

@@ -414,8 +414,11 @@ def _report(study: Study, s: dict) -> list[str]:
         "",
         f"Cheapest tolerances with {cons}. Each budgeted value is its law's centre + tolerance × a standard draw "
         f"(common random numbers, {b['optimisation_samples']:,} samples, smoothed quantile); the budget is then scaled on a fresh "
-        f"sample to clear the target by four binomial standard errors and verified on another fresh sample of "
-        f"{b['verified_samples']:,}. Every source's tolerance is capped at its maximum (`maximum_factor` × nominal). "
+        f"sample until every yield clears its target by four binomial standard errors (at most 1 − 1/n) and every mean ± kσ "
+        f"meets its spec, and verified on another fresh sample of {b['verified_samples']:,}. Every source's tolerance is "
+        "capped at its maximum (`maximum_factor` × nominal). The uniform scaling (the baseline) is the nominal tolerances "
+        "times one common factor, calibrated the same way; a source's share of the statistic is ∂statistic/∂T · T of the "
+        "first constraint at the budget (for a TE linear in the errors the shares add up to the statistic). "
         f"Solver converged: {b['solver_converged']} ({b['solver_result']}).",
         "",
         f"| source | nominal | optimised | uniform scaling | ISO grade | cost model | share of the statistic ({sym}) |",
@@ -430,12 +433,21 @@ def _report(study: Study, s: dict) -> list[str]:
         """A tolerance as the report shows it: µm, or ″ for an angular source (held in rad)."""
         return f"{value * ARCSEC_PER_RAD:.3g}″" if angular(n) else format(value, fmt)
 
+    capped = [n for n, t in b["tolerances_um"].items() if t >= b["maximum_tolerances_um"][n] * (1 - 1e-12)]
     for n, t in b["tolerances_um"].items():
         cost_model = b["cost_models"][n].replace("T in µm", "T in rad") if angular(n) else b["cost_models"][n]
         lines.append(
-            f"| {n} | {tol(n, b['nominal_tolerances_um'][n], 'g')} | {tol(n, t)} | {tol(n, b['baseline_tolerances_um'][n])} | "
+            f"| {n} | {tol(n, b['nominal_tolerances_um'][n], 'g')} | {tol(n, t)}{' (maximum)' if n in capped else ''} | "
+            f"{tol(n, b['baseline_tolerances_um'][n])} | "
             f"{b['grades'].get(n, '—')} | {cost_model} | {b[f'contributions_{u}'][n]:.2f} |"
         )
+    if capped:
+        lines += [
+            "",
+            f"**At their maximum:** {', '.join(capped)}: the constraints do not limit {'it' if len(capped) == 1 else 'them'} "
+            "within `maximum_factor` × nominal (a TE that hardly depends on a source, or not at all under this model and "
+            "assembly rule). Check that the model holds every effect of such a source before releasing that tolerance.",
+        ]
     if b.get("optimised_direction_beaten_by_uniform_scaling"):
         lines += [
             "",
@@ -472,7 +484,13 @@ def _report(study: Study, s: dict) -> list[str]:
         lines.append("")
     lines += ["![contributions](contributions.png)", ""]
     if "pareto" in b:
-        lines += [f"| spec ({sym}) | optimised cost | uniform-scaling cost | verified yield |", "|---|---|---|---|"]
+        lines += [
+            "Cost against the first constraint's spec: each point optimised and verified afresh on half the samples of the "
+            "budget above (its own Monte Carlo noise: a point at the budget's spec differs from it by that much).",
+            "",
+            f"| spec ({sym}) | optimised cost | uniform-scaling cost | verified yield |",
+            "|---|---|---|---|",
+        ]
         lines += [f"| {r[f'spec_{u}']:g} | {r['cost']:.4f} | {r['baseline_cost']:.4f} | {r['verified_yield']:.5f} |" for r in b["pareto"]]
         lines += ["", "![cost vs spec](pareto.png)", ""]
     lines += ["The statistics above are a further Monte Carlo at the optimised tolerances (the study's own samples and seed).", ""]

@@ -502,7 +502,8 @@ class CycloidPin(AbstractGridDrive):
         n = a.positions_per_pitch * self.z_pins * a.revolutions
         return (
             f"taken on a grid of {n} input angles ({a.positions_per_pitch} per pin pitch of {360 / self.z_pins:.4g}° over "
-            f"{a.revolutions} input revolution(s)), not between them; at each angle the contact of every pin is solved "
+            f"{a.revolutions} input revolution(s) of the {self.z_lobes} after which pins and tooth spaces pair again), not "
+            "between them; at each angle the contact of every pin is solved "
             "by a bracketed Newton iteration to a radius residual below 1e-9 mm (convergence checked and reported)"
         )
 

@@ -56,7 +56,7 @@ class LostMotion(AbstractMetric):
     at most over the drive's input-angle grid (rad)."""
 
     name: ClassVar[str] = "lost_motion"
-    label: ClassVar[str] = "lost motion, max over the cycle"
+    label: ClassVar[str] = "lost motion, max over the grid"
     quantity: ClassVar[Quantity] = "angle"
     report_unit: ClassVar[str | None] = "arcmin"
 
@@ -72,7 +72,7 @@ class LostMotionMin(AbstractMetric):
     """The smallest lost motion over the grid (rad); negative where the rigid disc interferes."""
 
     name: ClassVar[str] = "lost_motion_min"
-    label: ClassVar[str] = "lost motion, min over the cycle"
+    label: ClassVar[str] = "lost motion, min over the grid"
     quantity: ClassVar[Quantity] = "angle"
     report_unit: ClassVar[str | None] = "arcmin"
 
@@ -106,7 +106,7 @@ class LoadedPairs(AbstractMetric):
     budget, averaged over the grid. Smooth surrogate: the sigmoid count, averaged likewise."""
 
     name: ClassVar[str] = "loaded_pairs"
-    label: ClassVar[str] = "loaded pairs, mean over the cycle"
+    label: ClassVar[str] = "loaded pairs, mean over the grid"
     quantity: ClassVar[Quantity] = "count"
     higher_is_better: ClassVar[bool] = True
     report_unit: ClassVar[str | None] = "pairs"
@@ -128,7 +128,7 @@ class LoadedPairsMin(AbstractMetric):
     """The fewest loaded pairs over the grid. Smooth surrogate: the smallest sigmoid count over the grid."""
 
     name: ClassVar[str] = "loaded_pairs_min"
-    label: ClassVar[str] = "loaded pairs, min over the cycle"
+    label: ClassVar[str] = "loaded pairs, min over the grid"
     quantity: ClassVar[Quantity] = "count"
     higher_is_better: ClassVar[bool] = True
     report_unit: ClassVar[str | None] = "pairs"

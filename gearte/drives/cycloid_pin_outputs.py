@@ -451,6 +451,7 @@ def monte_carlo_summary(drive: CycloidPin, context: AbstractStudyContext, u: dic
     return {
         "samples": context.samples,
         "seed": context.seed,
+        "z_lobes": drive.z_lobes,
         "positions": {"count": int(drive.input_angles().size), "per_pitch": a.positions_per_pitch, "revolutions": a.revolutions},
         "tolerances": tolerance_rows(context.model),
         "lost_motion_max_arcmin": _stats(u["lost_motion_max"] * ARCMIN_PER_RAD, "arcmin"),
@@ -532,7 +533,7 @@ def study_outputs(drive: CycloidPin, context: AbstractStudyContext) -> StudyOutp
             "gearte.drives.cycloid_pin_plots:distributions",
             dict(
                 series=[
-                    ("lost motion, max over the cycle (′)", u["lost_motion_max"] * ARCMIN_PER_RAD, "′"),
+                    ("lost motion, max over the grid (′)", u["lost_motion_max"] * ARCMIN_PER_RAD, "′"),
                     ("rotation error p-p (″)", u["rotation_error_p2p"] * ARCSEC_PER_RAD, "″"),
                     (f"loaded pairs at θ_T (of {n_out})", u["loaded_pairs"], ""),
                 ],

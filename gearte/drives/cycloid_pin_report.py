@@ -114,8 +114,9 @@ def report(drive: CycloidPin, s: dict) -> list[str]:
         "",
         "## Monte Carlo of the clearances over the error laws",
         "",
-        f"{mc['samples']:,} reducers, seed {mc['seed']}; the cycle: {mc['positions']['count']} input positions "
-        f"({mc['positions']['per_pitch']} per pin pitch over {mc['positions']['revolutions']} revolution(s)).",
+        f"{mc['samples']:,} reducers, seed {mc['seed']}; the grid: {mc['positions']['count']} input positions "
+        f"({mc['positions']['per_pitch']} per pin pitch over {mc['positions']['revolutions']} input revolution(s)). "
+        + _cycle_note(mc["positions"]["revolutions"], mc.get("z_lobes")),
         "",
         "| error | law |",
         "|---|---|",
@@ -123,11 +124,11 @@ def report(drive: CycloidPin, s: dict) -> list[str]:
     L += [f"| {k} | {v} |" for k, v in mc["tolerances"].items()]
     L += ["", "| quantity | mean | std | P5 | P50 | P95 | max |", "|---|---|---|---|---|---|---|"]
     for label, key in (
-        ("lost motion, max over the cycle (′)", "lost_motion_max_arcmin"),
-        ("lost motion, min over the cycle (′)", "lost_motion_min_arcmin"),
+        ("lost motion, max over the grid (′)", "lost_motion_max_arcmin"),
+        ("lost motion, min over the grid (′)", "lost_motion_min_arcmin"),
         ("rotation error p-p (″)", "rotation_error_p2p_arcsec"),
         (f"loaded pairs at θ_T (of {s['loaded_pairs_out_of']})", "loaded_pairs"),
-        ("loaded pairs, min over the cycle", "loaded_pairs_min_over_cycle"),
+        ("loaded pairs, min over the grid", "loaded_pairs_min_over_cycle"),
     ):
         q = mc[key]
         L.append(
@@ -136,7 +137,7 @@ def report(drive: CycloidPin, s: dict) -> list[str]:
         )
     L += [
         "",
-        f"Reducers that interfere somewhere in the cycle (lost motion < 0): {100 * mc['interference_fraction']:.2f} %"
+        f"Reducers that interfere somewhere on the grid (lost motion < 0): {100 * mc['interference_fraction']:.2f} %"
         + (
             f"; the others have {mc['loaded_pairs_without_interference']['mean']:.2f} loaded pairs at θ_T on average."
             if mc["loaded_pairs_without_interference"] and mc["interference_fraction"] > 0
@@ -162,3 +163,14 @@ def report(drive: CycloidPin, s: dict) -> list[str]:
 
 
 __all__ = ("report",)
+
+
+def _cycle_note(revolutions: int, z_lobes: int | None) -> str:
+    """What the grid covers of the cycle after which pins and tooth spaces pair again (z_a input revolutions)."""
+    if not z_lobes or revolutions % z_lobes == 0:
+        return "The grid covers whole output revolutions, the cycle after which pins and tooth spaces pair again."
+    return (
+        f"Pins and tooth spaces pair again only after z_a = {z_lobes} input revolutions (one output revolution); the grid "
+        f"covers {revolutions} of them, so a maximum over it is a lower bound, and a minimum an upper bound, of the whole "
+        "cycle's (more `[drive.grid] revolutions` extend it, at a proportional cost)."
+    )

@@ -476,8 +476,8 @@ class HarmonicDrive(AbstractSinusoidalDrive):
         return (
             "exact over the whole hyper-period: two-scale extrema (gearte.extrema_two_scale) — the tooth-mesh line "
             "(z₂ × input speed for an even z₂) as a fast line on the exact extrema of the other classes (a grid of 16 points per "
-            "period of their fastest term, Newton refinement), with a certified bound on the error of every value; "
-            "tested equal to the full-grid extrema to ~1e-12"
+            "period of their fastest term, Newton refinement), with a certified bound on the error of every value, the "
+            "largest stated with the run"
         )
 
     def bytes_per_sample(self) -> int:
