@@ -659,6 +659,11 @@ def test_unmodified_example_has_more_loaded_pairs(tmp_path):
     floating = unmod["disc_centre"]["loaded_pairs_floating"]
     assert floating["positions"] > 0 and floating["min"] > mod["loaded_pairs"]
     assert unmod["lost_motion_arcmin"] < mod["lost_motion_arcmin"]
+    # Beside the headline, a warning says which share of the batch interferes (every unit here: the errors are the
+    # reducer analysed's); the modified reducer has none.
+    share = unmod["monte_carlo"]["interference_fraction"]
+    assert share == 1.0 and unmod["warnings"][0].startswith("100.00 % of the reducers interfere somewhere on the grid")
+    assert mod["monte_carlo"]["interference_fraction"] == 0.0 and "warnings" not in mod
 
 
 def _summary(tmp_path, name):

@@ -491,9 +491,10 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
         summary["warnings"] = [
             f"the {study.metric.name} reaches {largest:.4g}{sym}, beyond {SMALL_ANGLE_RAD:g} rad: far past the small errors "
             "the drive's model assumes; check the drive's dimensions and their units against the error magnitudes"
-        ]
-        if jax.process_index() == 0:  # one line for a several-process run
-            print(f"gearte: warning: {summary['warnings'][0]}", file=sys.stderr)
+        ] + list(summary.get("warnings", ()))
+    if jax.process_index() == 0:  # one line each for a several-process run
+        for w in summary.get("warnings", ()):
+            print(f"gearte: warning: {w}", file=sys.stderr)
     summary["timing_s"]["total"] = time.perf_counter() - t_start
     text = report(study, summary, errs, tr)
     for o in outcomes:

@@ -482,6 +482,13 @@ def study_outputs(drive: CycloidPin, context: AbstractStudyContext) -> StudyOutp
     # The per-sample clearances were computed in the study's own Monte Carlo pass (`CycloidPin.sample_outputs`).
     u = unpack(drive, context.outputs["clearances"])
     summary["monte_carlo"] = monte_carlo_summary(drive, context, u)
+    share = summary["monte_carlo"]["interference_fraction"]
+    if share > 0:  # beside the headline: the lost motion of such a reducer is no play (the rigid model fails there)
+        summary["warnings"] = [
+            f"{100 * share:.2f} % of the reducers interfere somewhere on the grid (lost motion < 0): the rigid disc, its "
+            "centre held at the fixed offsets, cannot be assembled there, and their lost motion is not a play (the "
+            "Monte Carlo section below)"
+        ]
     summary["analysis_timing_s"] = timing
 
     budget, zb, theta0 = drive.analysis.budget_mm, drive.z_pins, input_angle(drive)

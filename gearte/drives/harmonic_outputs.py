@@ -138,7 +138,8 @@ def study_outputs(drive: HarmonicDrive, context: AbstractStudyContext) -> StudyO
         "Rayleigh with scale tolerance/6). A catalogue accuracy is the peak-to-peak over a whole output revolution, "
         "which collects every class at its crest (the CS and FS lines add once per beat) and spans both signs: its "
         f"distribution lies well above the ±3σ figure (P99.73 = {p('p99_73_over_estimate', 2)} × estimate here). "
-        "Liu measured 0.82–0.95 × the estimate on three units (K_b = 1); in this batch the median unit is at "
+        "Liu's three measured units are at 0.84, 0.95 and 0.83 × the estimate (K_b = 1; by the paper's own table, which "
+        "prints 0.85, 0.95, 0.82); in this batch the median unit is at "
         f"{p('median_over_estimate', 2)} × the estimate. K_b (0.8–1.0, from experiment) scales every figure alike; "
         "it does not make the estimate a 99.73 % bound on the catalogue figure.",
         "",

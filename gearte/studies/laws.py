@@ -42,6 +42,13 @@ def format_value(value: float, unit: str) -> str:
     return f"{value:g} {unit}"
 
 
+def _angle_text(x: float) -> str:
+    """A phase for reports, rad and degrees; within 1e-9 rad (0.0002″) of a whole turn it reads 0, as an optimiser's
+    rounding there means."""
+    near = abs(math.remainder(x, TWO_PI)) <= 1e-9
+    return "0 rad (0°)" if near else f"{x:.6g} rad ({math.degrees(x):.6g}°)"
+
+
 class AbstractLaw(eqx.Module):
     """Law of an error value (µm, or rad for angles): ``sample(key, shape)``."""
 
@@ -320,7 +327,7 @@ class FixedPhase(AbstractPhase):
         return jnp.broadcast_to(self.value, shape)
 
     def describe(self, unit: str = "rad") -> str:
-        return f"fixed {float(self.value):.6g} rad ({math.degrees(float(self.value)):.6g}°)"
+        return f"fixed {_angle_text(float(self.value))}"
 
 
 class AbstractRule(AbstractPhase):
@@ -357,7 +364,7 @@ class RelativePhase(AbstractRule):
         raise ValueError(f"RelativePhase: a rule relative to {self.to!r} is drawn by the error model, not on its own")
 
     def describe(self, unit: str = "rad") -> str:
-        return f"assembly rule: phase of {self.to} + {float(self.offset):.6g} rad ({math.degrees(float(self.offset)):.6g}°)"
+        return f"assembly rule: phase of {self.to} + {_angle_text(float(self.offset))}"
 
 
 class Optimised(AbstractRule):
