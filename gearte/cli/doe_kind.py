@@ -16,11 +16,13 @@ import math
 import re
 from typing import TYPE_CHECKING, Any
 
+import jax
 import numpy as np
 
 from ..core.metrics import AbstractMetric
 from ..core.schema import MAX_SAMPLES, ConfigError, Table
 from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
+from ..core.validate import as_key
 from ..drives.protocol import Figure
 from ..studies.doe import (
     AbstractDesign,
@@ -238,8 +240,7 @@ class Doe(AbstractStudyKind):
     def run(self, study: Study, spec: DoeSpec, *, progress: bool | None) -> KindOutcome:
         unit = study.unit if spec.metric.quantity == "angle" else "pairs"
 
-        def response(x, args):
-            del args
+        def response(x, key):
             sources = {}
             for v, xi in zip(spec.variables, x):
                 src = study.errors.sources[v.source]
@@ -247,7 +248,9 @@ class Doe(AbstractStudyKind):
             fn = TEStudy(study.drive, study.errors.replace(**sources), metric=spec.metric)
             # Blocks no larger than a run: a small Monte Carlo per run computes no samples it drops.
             block = min(default_block_size(fn.bytes_per_sample()), spec.samples)
-            values = monte_carlo(fn, key=study.seed, n_samples=spec.samples, block_size=block, progress=False).values
+            values = monte_carlo(
+                fn, key=study.seed if key is None else key, n_samples=spec.samples, block_size=block, progress=False
+            ).values
             values = np.asarray(angle_from_rad(values, study.unit) if spec.metric.quantity == "angle" else values)
             return statistic(values, spec.statistic)
 
@@ -255,8 +258,12 @@ class Doe(AbstractStudyKind):
         run = run_design(response, spec.design, variables, vectorise=False, progress=progress, desc=f"{study.name} doe")
         surface = fit_response_surface(run.natural, run.responses, variables=run.variables)
         opt = surface.optimum(spec.goal)  # pyright: ignore[reportArgumentType]
+        # The model at the optimum with the design's random numbers (what the surface was fitted to: its residual there)
+        # and with fresh ones (a batch the design never saw: the Monte Carlo's own noise on the response as well).
         confirmed = float(response(opt.natural, None))
+        fresh = float(response(opt.natural, jax.random.fold_in(as_key(study.seed), 1)))
         entry = doe_summary(study, spec, run.coded, surface, opt, confirmed, unit=unit, seconds=run.seconds)
+        entry["optimum"]["confirmed_fresh_samples"] = fresh
         return KindOutcome(
             study=study, key="doe", summary=entry, figures=doe_figures(surface, opt, unit=unit), report=lambda s: doe_report(s["doe"])
         )
@@ -446,7 +453,9 @@ def doe_report(d: dict) -> list[str]:
     lines += [
         f"Optimum ({o['goal']}) within the variables' ranges, {where}: "
         + ", ".join(f"{n} = {x:.4g}" for n, x in o["x"].items())
-        + f"; predicted {o['predicted']:.4f}{sym}, confirmed by a run there: {o['confirmed']:.4f}{sym}.",
+        + f"; predicted {o['predicted']:.4f}{sym}; the model run there gives {o['confirmed']:.4f}{sym} with the design's "
+        f"random numbers (the surface's own error there) and {o['confirmed_fresh_samples']:.4f}{sym} on {r['samples']:,} fresh "
+        "samples (with the Monte Carlo's noise on the response).",
         "",
         "![residuals](doe_residuals.png)",
         "",

@@ -215,7 +215,8 @@ def pathwise_report(entry: dict) -> list[str]:
         "",
         "## Sensitivity of the Monte Carlo means to the error laws",
         "",
-        f"Pathwise derivatives over {entry['samples']:,} samples (the study's first samples, random numbers held): "
+        f"Pathwise derivatives over {entry['samples']:,} samples (samples 0 … {entry['samples'] - 1:,} of the study's seed, "
+        "its `pathwise_samples` whatever the Monte Carlo's count; random numbers held): "
         "mean of the per-sample gradient of each metric's smooth value.",
         "",
         "| | " + " | ".join(f"{n}" for n in names) + " |",
