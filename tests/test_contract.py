@@ -252,6 +252,10 @@ def test_a_short_run_writes_every_output(case, tmp_path, monkeypatch, capsys, ex
         assert (out / f).exists(), f
     s = json.loads((out / "summary.json").read_text())
     assert s["te"]["n"] == 40 and s["te"]["metric"] == study.metric.name
+    # The typical unit's trace spans the drive's hyper-period only for a sinusoidal drive; a grid drive's is its window.
+    typical = s["typical_sample"]
+    assert ("hyper_period_input_revs" in typical) == isinstance(study.drive, gearte.AbstractSinusoidalDrive)
+    assert typical["trace_input_revs"] == typical.get("hyper_period_input_revs", typical["trace_input_revs"])
     for figure in (out / "report.md").read_text().split("](")[1:]:
         assert (out / figure.split(")")[0]).exists(), figure.split(")")[0]
 

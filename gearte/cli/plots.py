@@ -67,7 +67,9 @@ def trace(theta_rev, te, *, unit: str, title: str, path, marks=()):
     fig = Figure(figsize=(9, 4), dpi=110)
     ax = fig.subplots()
     ax.plot(theta_rev, te, color="#4477aa", linewidth=0.8)
-    ax.axhline(0.0, color="#999999", linewidth=0.6)
+    lo, hi = float(np.min(te)), float(np.max(te))
+    if lo - 0.5 * (hi - lo) <= 0.0 <= hi + 0.5 * (hi - lo):  # the zero line where it does not squash the curve flat
+        ax.axhline(0.0, color="#999999", linewidth=0.6)
     for x, y, label in marks:
         ax.plot([x], [y], "o", color="#cc3311", markersize=5)
         ax.annotate(label, (x, y), textcoords="offset points", xytext=(6, 6), fontsize=8)

@@ -410,12 +410,14 @@ def _run(study: Study, tmp: Path, *, progress: bool | None, command: str | None,
         "typical_sample": {
             "index": typical,
             "te": typical_value,
-            "hyper_period_input_revs": tr.span_revs,
+            "trace_input_revs": tr.span_revs,
             "max": mx,
             "min": mn,
             "theta_max_rad": tr.theta_max,
             "theta_min_rad": tr.theta_min,
-        },
+        }
+        # A sinusoidal drive's trace is its whole hyper-period; a grid drive's is its grid's window (its accuracy line).
+        | ({"hyper_period_input_revs": tr.span_revs} if isinstance(study.drive, AbstractSinusoidalDrive) else {}),
         "assumptions": {
             "metric": study.metric.describe(),
             "random_keys": "sample i uses jax.random.fold_in(jax.random.key(seed), i); error source j of a sample uses fold_in(that key, j)",

@@ -98,7 +98,7 @@ def report(study: Study, s: dict, errs: dict, tr) -> str:
         "## The typical sample",
         "",
         f"Sample #{typ['index']} (closest to the median): {study.metric.name} {typ['te']:.3f}{sym if angle else ''}; over "
-        f"{typ['hyper_period_input_revs']} input revolutions the TE runs from {typ['min']:.3f}{sym} "
+        f"{typ['trace_input_revs']} input revolutions the TE runs from {typ['min']:.3f}{sym} "
         f"(at θ_in = {typ['theta_min_rad']:.6f} rad) to {typ['max']:.3f}{sym} (at θ_in = {typ['theta_max_rad']:.6f} rad).",
         "",
         "| source | value or magnitude | phase (rad) |",

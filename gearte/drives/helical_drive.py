@@ -141,7 +141,11 @@ class HelicalPeakToPeak(AbstractMetric):
         return jnp.max(response.te) - jnp.min(response.te)
 
     def describe(self) -> str:
-        return "peak-to-peak over the window's grid of the loaded TE = θ_sun − i θ_carrier (mesh stiffness variation and errors)"
+        return (
+            "peak-to-peak over the analysis window's grid (its carrier turns: the accuracy line) of the loaded TE = "
+            "θ_sun − i θ_carrier, i the carrier-to-sun ratio (the errors, and the mesh stiffness variation where the "
+            "stiffness model has one)"
+        )
 
 
 class HelicalErrorPeakToPeak(AbstractMetric):
@@ -158,7 +162,10 @@ class HelicalErrorPeakToPeak(AbstractMetric):
         return jnp.max(d) - jnp.min(d)
 
     def describe(self) -> str:
-        return "peak-to-peak over the window's grid of the unit's loaded TE minus the error-free stage's (the errors' share)"
+        return (
+            "peak-to-peak over the analysis window's grid (its carrier turns: the accuracy line) of the unit's loaded TE "
+            "minus the error-free stage's (the errors' share)"
+        )
 
 
 METRICS: tuple[type[AbstractMetric], ...] = (HelicalPeakToPeak, HelicalErrorPeakToPeak)
