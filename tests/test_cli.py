@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import os
 import subprocess
 import sys
@@ -80,6 +81,8 @@ def test_examples_run_and_write_every_output(path, tmp_path):
         assert needed in report, needed
     # 600 × 0.27 % = 1.6 samples beyond P99.73 (and 6 beyond P99): the first is flagged as no estimate of the tail.
     assert "P99.73 from 600 samples: fewer than 3 samples lie beyond it" in report
+    # The typical sample's values carry their unit (µm for every planetary source), once per row.
+    assert re.search(r"\| ring_manufacturing \| [-0-9.e]+ µm \| [0-9.]+ \|", report), report
     if "eq9" not in path.stem:
         assert "single path" in report  # the coupling assumption is stated
     if "rayleigh" in path.stem:

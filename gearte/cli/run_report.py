@@ -11,6 +11,17 @@ from ..studies.montecarlo import PERCENTILES
 from .config import Study
 
 
+def _values_text(x: np.ndarray, unit: str, name: str) -> str:
+    """A typical sample's values (one per instance) with their unit once: µm; an angle in ″, or, for a source that is a
+    phase (its name ends in `_phase`), in rad (0 … 2π) with degrees."""
+    if unit != "rad":
+        return ", ".join(f"{v:.4g}" for v in x) + f" {unit}"
+    if name.endswith("_phase"):
+        x = x % (2 * math.pi)
+        return ", ".join(f"{v:.4f}" for v in x) + " rad (" + ", ".join(f"{math.degrees(v):.1f}" for v in x) + "°)"
+    return ", ".join(f"{v * ARCSEC_PER_RAD:.4g}" for v in x) + "″"
+
+
 def _thin_tails(n: int) -> str:
     """A warning for the percentiles that fewer than 3 samples lie beyond (either side), with `n` samples: there a
     percentile is an interpolation between the few extreme samples, not an estimate of the batch's."""
@@ -104,9 +115,10 @@ def report(study: Study, s: dict, errs: dict, tr) -> str:
         "| source | value or magnitude | phase (rad) |",
         "|---|---|---|",
     ]
+    specs = study.errors.specs
     for name, e in errs.items():
         mag = e.magnitude if hasattr(e, "magnitude") else e
-        mags = ", ".join(f"{float(x):.4g}" for x in np.atleast_1d(np.asarray(mag)))
+        mags = _values_text(np.atleast_1d(np.asarray(mag, dtype=float)), specs[name].unit if name in specs else "µm", name)
         phs = ", ".join(f"{float(x) % (2 * math.pi):.4f}" for x in np.atleast_1d(np.asarray(e.phase))) if hasattr(e, "phase") else "—"
         lines.append(f"| {name} | {mags} | {phs} |")
     if tr.lines:
