@@ -148,6 +148,10 @@ def test_the_binding_constraint_of_several_sets_the_scale_in_closed_form():
     assert b.tolerances["a"] == pytest.approx(alone[0.5], rel=0.02)
     se = lambda q: 3 * math.sqrt(q * (1 - q) / 40_000)
     assert b.verified_yields[1] >= 0.5 - se(0.5) and b.verified_yields[0] >= 0.999
+    # Each constraint's statistic on the fresh sample: the median at its spec (less the calibration's margin), the
+    # P99 well inside its own.
+    assert len(b.verified_statistics) == 2 and b.verified_statistics[0] == b.verified_statistic
+    assert b.verified_statistics[1] == pytest.approx(5 * GAIN, rel=0.05) and b.verified_statistics[0] < 20 * GAIN
 
 
 def test_optimised_budget_is_cheaper_and_meets_the_yield_on_a_fresh_seed():
@@ -448,3 +452,41 @@ def test_budget_report_gives_angular_tolerances_in_arcseconds():
     # A verified yield under the target is said so, with how many standard errors that is.
     low = "\n".join(_report(study, {"budget": b | {"verified_yield": 0.995}}))
     assert "**Below its target on the fresh sample:** the yield of the metric is 0.9950 against 0.9973, 1.4 binomial" in low
+
+
+def test_a_budget_of_several_constraints_reports_each_as_verified():
+    """A yield by its yield, a mean − kσ by its value against the spec (it has no yield), each said met or not."""
+    from gearte.cli.budget_kind import _report
+
+    study = load_study(ROOT / "examples" / "cycloid_yao2001_budget.toml")
+    names = ["pin_radius"]
+    b = {
+        "constraint": "yield",
+        "spec_arcmin": 27.5,
+        "target_yield": 0.9973,
+        "constraints": [
+            {"metric": "lost_motion", "spec": 27.5, "spec_unit": "arcmin", "constraint": "yield", "target": 0.9973},
+            {"metric": "loaded_pairs", "spec": 4.04, "spec_unit": "pairs", "constraint": "mean_k_sigma", "target": 3.0},
+        ],
+        "verified_yields": [0.999, 1.0],
+        "verified_statistics": [21.3, 4.01],
+        "optimisation_samples": 96,
+        "verified_samples": 2000,
+        "solver_converged": True,
+        "solver_result": "successful",
+        "tolerances_um": {n: 1.0 for n in names},
+        "nominal_tolerances_um": {n: 1.0 for n in names},
+        "maximum_tolerances_um": {n: 10.0 for n in names},
+        "baseline_tolerances_um": {n: 1.0 for n in names},
+        "grades": {},
+        "cost_models": {n: gearte.Reciprocal(0.0, 1.0).describe() for n in names},
+        "contributions_arcmin": {n: 0.1 for n in names},
+        "cost": 2.0,
+        "baseline_cost": 2.1,
+        "baseline_scale": 1.0,
+        "verified_yield": 0.999,
+        "baseline_verified_yield": 0.999,
+    }
+    text = "\n".join(_report(study, {"budget": b}))
+    assert "| yield of lost_motion ≥ 0.9973 | ≤ 27.5′ | yield 0.99900 | yes |" in text
+    assert "| mean − 3σ of loaded_pairs | ≥ 4.04 pairs | 4.01 pairs | **no** |" in text

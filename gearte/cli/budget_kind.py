@@ -264,6 +264,11 @@ class Budget(AbstractStudyKind):
                 for c in b.constraints
             ]
             entry["verified_yields"] = list(best.verified_yields)
+            # Each constraint's own statistic on the fresh sample, in its spec's unit (a mean ± kσ has no yield).
+            entry["verified_statistics"] = [
+                float(angle_from_rad(v, u)) if c.metric.quantity == "angle" else float(v)
+                for c, v in zip(b.constraints, best.verified_statistics, strict=True)
+            ]
         entry["optimised_direction_beaten_by_uniform_scaling"] = beaten
         entry |= {
             "tolerances_um": best.tolerances,
@@ -394,6 +399,28 @@ def _below_target(b: dict) -> list[str]:
     return out
 
 
+def _constraint_rows(study: Study, b: dict) -> list[str]:
+    """Each constraint as verified on the fresh sample, where there are several: a yield by its yield, a mean ± kσ by
+    its value against the spec (a mean ± kσ has no yield)."""
+    if "verified_statistics" not in b:
+        return []
+    rows = [
+        f"| constraint | spec | verified on {b['verified_samples']:,} fresh samples | met |",
+        "|---|---|---|---|",
+    ]
+    for c, y, v in zip(b["constraints"], b["verified_yields"], b["verified_statistics"], strict=True):
+        higher = study.drive.metrics[c["metric"]].higher_is_better
+        unit = UNIT_SYMBOLS.get(c["spec_unit"], f" {c['spec_unit']}")
+        if c["constraint"] == "yield":
+            what, got, met = f"yield of {c['metric']} ≥ {c['target']:g}", f"yield {y:.5f}", y >= c["target"]
+        else:
+            sign = "−" if higher else "+"
+            what = f"mean {sign} {c['target']:g}σ of {c['metric']}"
+            got, met = f"{v:.4g}{unit}", (v >= c["spec"]) if higher else (v <= c["spec"])
+        rows.append(f"| {what} | {'≥' if higher else '≤'} {c['spec']:g}{unit} | {got} | {'yes' if met else '**no**'} |")
+    return [*rows, ""]
+
+
 def _report(study: Study, s: dict) -> list[str]:
     b = s["budget"]
     u = study.unit
@@ -464,6 +491,7 @@ def _report(study: Study, s: dict) -> list[str]:
         f"{_yield_target(b):g} on {b['verified_samples']:,} fresh samples).",
         "",
     ]
+    lines += _constraint_rows(study, b)
     lines += _below_target(b)
     if b.get("verified_samples_with_failed_solves"):
         lines += [

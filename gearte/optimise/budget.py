@@ -122,8 +122,9 @@ class BudgetResult(eqx.Module):
     - `tolerances`: per budgeted source (µm, or rad); `cost`: Σ cost_i.
     - `verified_yield`: fraction of `verified_samples` fresh samples meeting every constraint;
       `verified_yields`: per constraint; `verified_statistic`: the first constraint's exact
-      statistic there, over the samples that solved (rad for angles); `verified_values`: the first constraint's exact
-      metric per sample (NaN where its solves failed).
+      statistic there, over the samples that solved (rad for angles); `verified_statistics`: every constraint's (in
+      its metric's units: rad for angles, a count for pairs); `verified_values`: the first constraint's exact metric per
+      sample (NaN where its solves failed).
     - `failed_solves`: verification samples whose solves failed (a drive that solves, such as the RV reducer; a
       yield counts them as missing its spec, a mean ± kσ is taken over the samples that solved).
     - `result`: the solve's `RESULTS` code; `converged`: whether the optimiser reported success.
@@ -140,6 +141,7 @@ class BudgetResult(eqx.Module):
     converged: bool
     label: str
     failed_solves: int = 0
+    verified_statistics: tuple[float, ...] = ()
 
 
 # Module-level compiled functions, keyed on the problem's structure and not on a fresh closure: a
@@ -308,6 +310,7 @@ def _calibrate_and_verify_with(
         verified_yield=float(np.mean(np.logical_and.reduce(met))),
         verified_yields=tuple(float(np.mean(m)) for m in met),
         verified_statistic=_exact_stat(p.constraints[0], _solved(p.constraints[0], x[0])),
+        verified_statistics=tuple(_exact_stat(c, _solved(c, x[j])) for j, c in enumerate(p.constraints)),
         verified_samples=n_check,
         verified_values=np.where(x[0] == float(_missed(p.constraints[0])), np.nan, x[0]),
         result=result,
