@@ -9,6 +9,7 @@ and its keyword arguments); the command line calls the function with ``path=``.
 from __future__ import annotations
 
 import math
+import textwrap
 from typing import Any
 
 import numpy as np
@@ -81,6 +82,11 @@ def trace(theta_rev, te, *, unit: str, title: str, path, marks=()):
     fig.savefig(path)
 
 
+def _wrapped(text: str, width: int) -> str:
+    """`text` on lines of at most `width` characters (a run's title in a panel or legend)."""
+    return "\n".join(textwrap.wrap(text, width)) or text
+
+
 def overlay_histograms(series, *, unit: str, metric: str, path, bins: int = 80):
     """Several studies' TE distributions on one axis; `series` = [(label, values)]."""
     sym = _symbol(unit)
@@ -90,11 +96,13 @@ def overlay_histograms(series, *, unit: str, metric: str, path, bins: int = 80):
     hi = max(float(np.max(v)) for _, v in series)
     edges: Any = np.linspace(lo, hi, bins + 1) if hi > lo else bins
     colors = ["#4477aa", "#cc3311", "#228833", "#ccbb44", "#66ccee", "#aa3377", "#bbbbbb"]
+    # Densities, not counts: runs of different sample counts are drawn on one scale.
     for (label, v), c in zip(series, colors * 4):
-        ax.hist(v, bins=edges, histtype="stepfilled", alpha=0.35, color=c, label=f"{label} (mean {np.mean(v):.1f}{sym})")
-        ax.hist(v, bins=edges, histtype="step", color=c, linewidth=1.0)
+        text = f"{_wrapped(label, 60)} (n = {len(v):,}, mean {np.mean(v):.1f}{sym})"
+        ax.hist(v, bins=edges, density=True, histtype="stepfilled", alpha=0.35, color=c, label=text)
+        ax.hist(v, bins=edges, density=True, histtype="step", color=c, linewidth=1.0)
     ax.set_xlabel(f"{_METRIC_LABEL.get(metric, metric)} ({sym})")
-    ax.set_ylabel("samples")
+    ax.set_ylabel(f"probability density (1/{sym.strip()})")
     ax.legend(fontsize=8)
     ax.set_title("TE distributions compared", fontsize=10)
     fig.tight_layout()
@@ -113,7 +121,7 @@ def grid_of_histograms(series, *, unit: str, metric: str, path, bins: int = 60):
     axes = fig.subplots(rows, cols, squeeze=False, sharex=True)
     for ax, (label, v) in zip(axes.flat, series):
         ax.hist(v, bins=np.linspace(lo, hi, bins + 1) if hi > lo else bins, color="#4477aa", alpha=0.85)
-        ax.set_title(label, fontsize=9)
+        ax.set_title(_wrapped(label, 48), fontsize=9)
         ax.text(
             0.98,
             0.95,
