@@ -446,7 +446,7 @@ def _report(study: Study, s: dict) -> list[str]:
         "capped at its maximum (`maximum_factor` × nominal). The uniform scaling (the baseline) is the nominal tolerances "
         "times one common factor, calibrated the same way; a source's share of the statistic is ∂statistic/∂T · T of the "
         "first constraint at the budget (for a TE linear in the errors the shares add up to the statistic). "
-        f"Solver converged: {b['solver_converged']} ({b['solver_result']}).",
+        f"The optimiser {'converged' if b['solver_converged'] else 'did not converge'} ({b['solver_result']}).",
         "",
         f"| source | nominal | optimised | uniform scaling | ISO grade | cost model | share of the statistic ({sym}) |",
         "|---|---|---|---|---|---|---|",

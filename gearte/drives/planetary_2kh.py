@@ -357,7 +357,7 @@ class Planetary2KH(AbstractSinusoidalDrive):
             ),
             ("planets", f"{self.n_planets} at " + ", ".join(f"{math.degrees(float(x)):.6g}°" for x in self.planet_angles)),
             ("configuration", f"{self.input} input, {self.output} output, {self.fixed} fixed"),
-            ("ratio i (input/output)", f"{self.ratio} = {float(self.ratio):.6g}"),
+            ("ratio i (input/output)", f"{self.ratio}" if self.ratio.denominator == 1 else f"{self.ratio} = {float(self.ratio):.6g}"),
             ("speeds (× input): sun, carrier, ring, planet", ", ".join(f"{w[k]}" for k in ("sun", "carrier", "ring", "planet"))),
             ("planet coupling", self.coupling.description),
             ("output error per µm of (e_w + e_n)", f"{float(self._gain()) * ARCSEC_PER_RAD:.6g}″/µm"),
