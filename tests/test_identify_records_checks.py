@@ -267,3 +267,22 @@ def test_spectral_lines_refuse_a_separation_under_the_hann_main_lobe():
         with pytest.raises(ValueError, match=r"min_separation_bins: must be ≥ 2 \(the Hann main lobe\)"):
             gearte.spectral_lines(rec, min_separation_bins=bad)
     assert gearte.spectral_lines(rec, min_separation_bins=2.0).freq_cpm == pytest.approx([180.0], rel=1e-9)
+
+
+def test_identify_names_a_bad_argument_before_it_fits():
+    """Turns as one dict (not one per record), a turn per planet (turns turn a whole source), starts or steps below
+    one, something that is not a record: refused naming the argument, before any fit."""
+    d = two_line_drive()
+    theta = 2 * np.pi / 64 * np.arange(256)
+    rec = gearte.identification.MeasuredRecord(theta=theta, te=1e-4 * np.sin(theta) + 6e-5 * np.sin(3 * theta))
+    for kwargs, match in (
+        (dict(turns={"a": 1.0}), r"turns: one dict per record"),
+        (dict(turns=[{"a": [0.0, 1.0]}]), r"turns\['a'\]: one angle \(rad\) per source"),
+        (dict(turns=[{"a": float("nan")}]), r"turns\['a'\]: must be finite"),
+        (dict(starts=0), r"identify: starts: must be ≥ 1, got 0"),
+        (dict(max_steps=0), r"identify: max_steps: must be ≥ 1, got 0"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            identify(d, rec, key=0, **kwargs)
+    with pytest.raises(ValueError, match=r"records: every record must be a MeasuredRecord"):
+        identify(d, [rec, theta], key=0)  # pyright: ignore[reportArgumentType]

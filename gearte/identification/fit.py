@@ -42,6 +42,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from ..core.precision import require_x64
 from ..core.solution import RESULTS, check
 from ..core.units import TWO_PI
+from ..core.validate import as_int, check_array_values
 from ..drives.protocol import AbstractGridDrive, AbstractSinusoidalDrive, Eccentricity, Errors, zero_signal
 from ..studies.montecarlo import as_key
 from .identifiability import Group, Instance, groups, period, select
@@ -312,9 +313,17 @@ def identification_problem(
     require_x64()
     if not isinstance(drive, (AbstractSinusoidalDrive, AbstractGridDrive)):
         raise ValueError(f"identify: {type(drive).__name__} is neither a sinusoidal nor a grid drive of the drive protocol")
+    if not isinstance(records, (MeasuredRecord, Sequence)) or isinstance(records, str):
+        raise ValueError(f"records: a MeasuredRecord or a list of them (gearte.identification.read_record), got {type(records).__name__}")
     recs = [records] if isinstance(records, MeasuredRecord) else list(records)
     if not recs:
         raise ValueError("identify: give at least one record")
+    if not all(isinstance(r, MeasuredRecord) for r in recs):
+        raise ValueError("records: every record must be a MeasuredRecord (gearte.identification.read_record)")
+    starts = as_int("identify: starts", starts, minimum=1)
+    max_steps = as_int("identify: max_steps", max_steps, minimum=1)
+    if turns is not None and (isinstance(turns, Mapping) or not all(isinstance(t, Mapping) for t in turns)):
+        raise ValueError("turns: one dict per record (source → turn, rad; {} for none), e.g. turns=[{}, {'sun_assembly': 1.57}]")
     turn_list = [dict(t) for t in turns] if turns is not None else [{} for _ in recs]
     if len(turn_list) != len(recs):
         raise ValueError(f"turns: {len(turn_list)} entries for {len(recs)} records (one dict per record, {{}} for none)")
@@ -323,6 +332,9 @@ def identification_problem(
         for name in t:
             if name not in specs or specs[name].kind != "eccentricity":
                 raise ValueError(f"turns: {name!r} is not an eccentricity source of this drive; use one of {sorted(specs)}")
+            check_array_values(f"turns[{name!r}]", t[name], unit="rad")
+            if np.ndim(t[name]) != 0:
+                raise ValueError(f"turns[{name!r}]: one angle (rad) per source: a turn turns every instance of the source together")
     if isinstance(drive, AbstractGridDrive):
         from .fit_grid import grid_problem
 
