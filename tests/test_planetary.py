@@ -231,6 +231,10 @@ def test_profile_shifted_working_angles():
         (dict(z_sun=12, z_planet=36, z_ring=84, coupling="load_sharing"), r"gearte.LoadSharing\(\) is 'load_sharing' in a study file"),
         (dict(z_sun=12, z_planet=36, z_ring=84, coupling=gearte.LoadSharing), r"an instance: LoadSharing\(\)"),
         (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=3, planet_angles=[0.0, 1.0]), "planet_angles"),
+        (
+            dict(z_sun=12, z_planet=36, z_ring=84, n_planets=1, planet_angles=0.0),
+            r"planet_angles: a list of angles \(rad\), one per planet",
+        ),
         # two planets at one place (also a whole number of turns apart): they clash
         (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=3, planet_angles=[0.0, 2 * math.pi / 3, 0.0]), "clash"),
         (dict(z_sun=12, z_planet=36, z_ring=84, n_planets=3, planet_angles=[0.0, 2 * math.pi / 3, 20 * math.pi]), "clash"),

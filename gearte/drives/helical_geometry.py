@@ -146,6 +146,8 @@ class HelicalStage(eqx.Module):
         if planet_angles is None:
             angles = [2 * math.pi * i / n for i in range(n)]
         else:
+            if isinstance(planet_angles, (str, bytes)) or np.ndim(planet_angles) != 1:
+                raise ValueError(f"planet_angles: a list of angles (rad), one per planet, got {planet_angles!r}")
             angles = [as_float(f"planet_angles[{i}]", x) for i, x in enumerate(planet_angles)]
             if len(angles) != n:
                 raise ValueError(f"planet_angles: {len(angles)} angles for n_planets = {n}")

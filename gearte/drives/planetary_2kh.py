@@ -30,6 +30,7 @@ from typing import Any, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from ..core.schema import ConfigError, Table
@@ -206,6 +207,8 @@ class Planetary2KH(AbstractSinusoidalDrive):
         if planet_angles is None:
             angles = [2 * math.pi * i / n for i in range(n)]
         else:
+            if isinstance(planet_angles, (str, bytes)) or np.ndim(planet_angles) != 1:
+                raise ValueError(f"planet_angles: a list of angles (rad), one per planet, got {planet_angles!r}")
             angles = [_as_float(f"planet_angles[{i}]", x) for i, x in enumerate(planet_angles)]
             if len(angles) != n:
                 raise ValueError(f"planet_angles: {len(angles)} angles for n_planets = {n}")

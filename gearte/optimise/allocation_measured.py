@@ -156,6 +156,7 @@ def allocate_measured(
     if not adjust:
         raise ValueError("adjust: name at least one error source whose phase may be chosen")
     starts = as_int("starts", starts, minimum=1)
+    max_steps = as_int("max_steps", max_steps, minimum=1)
     if width is not None:
         width = as_float("width", width, positive=True, hint="the smoothing width, rad; None for the default")
     errors = drive.checked(errors)
