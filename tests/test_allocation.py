@@ -236,7 +236,7 @@ def test_rule_offsets_and_counts_are_checked():
         ([2.4], r"worst_case: offsets: give one value per adjusted source \['b', 'c'\]"),
         ([0.0, 0.0, 5.0], "shape \\(2,\\)"),
         ({"b": 2.4}, "missing \\['c'\\]"),
-        ({"b": 0.0, "c": 0.0, "z": 1.0}, "\\['z'\\] are not adjusted"),
+        ({"b": 0.0, "c": 0.0, "z": 1.0}, "; unknown \\['z'\\]"),
         ([0.0, math.nan], "must be finite"),
     ):
         with pytest.raises(ValueError, match=match):

@@ -409,14 +409,11 @@ def test_budget_progress_bar_counts_the_optimiser_evaluations_and_changes_nothin
     assert shown.tolerances == quiet.tolerances and shown.cost == quiet.cost
 
 
-def test_budget_report_gives_angular_tolerances_in_arcseconds():
-    # The RV budget example budgets the disc indexing error (rad inside): its report row must read in ″, not "0.00".
-    from gearte.cli.budget_kind import _report
-
-    study = load_study(ROOT / "examples" / "rv_robot_joint_budget.toml")
-    names = ("pin_radius", "disc_indexing")
-    rad = math.radians(12.0 / 3600)  # 12″
-    b = {
+def _budget_entry(*, tolerances: dict, nominal: dict, baseline: dict) -> dict:
+    """A budget's summary entry as `gearte run` writes it (`budget_kind`), for its report: one yield constraint of 1′ at
+    99.73 %, verified on 1,000 samples, each source's maximum 10 × nominal."""
+    names = list(tolerances)
+    return {
         "constraint": "yield",
         "spec_arcmin": 1.0,
         "target_yield": 0.9973,
@@ -424,10 +421,10 @@ def test_budget_report_gives_angular_tolerances_in_arcseconds():
         "verified_samples": 1000,
         "solver_converged": True,
         "solver_result": "successful",
-        "tolerances_um": {"pin_radius": 1.2, "disc_indexing": rad},
-        "nominal_tolerances_um": {"pin_radius": 1.0, "disc_indexing": math.radians(10.0 / 3600)},
-        "maximum_tolerances_um": {"pin_radius": 10.0, "disc_indexing": math.radians(100.0 / 3600)},
-        "baseline_tolerances_um": {"pin_radius": 1.1, "disc_indexing": 1.1 * math.radians(10.0 / 3600)},
+        "tolerances_um": tolerances,
+        "nominal_tolerances_um": nominal,
+        "maximum_tolerances_um": {n: 10 * t for n, t in nominal.items()},
+        "baseline_tolerances_um": baseline,
         "grades": {},
         "cost_models": {n: gearte.Reciprocal(0.0, 1.0).describe() for n in names},
         "contributions_arcmin": {n: 0.1 for n in names},
@@ -437,6 +434,19 @@ def test_budget_report_gives_angular_tolerances_in_arcseconds():
         "verified_yield": 0.998,
         "baseline_verified_yield": 0.998,
     }
+
+
+def test_budget_report_gives_angular_tolerances_in_arcseconds():
+    # The RV budget example budgets the disc indexing error (rad inside): its report row must read in ″, not "0.00".
+    from gearte.cli.budget_kind import _report
+
+    study = load_study(ROOT / "examples" / "rv_robot_joint_budget.toml")
+    rad = math.radians(12.0 / 3600)  # 12″
+    b = _budget_entry(
+        tolerances={"pin_radius": 1.2, "disc_indexing": rad},
+        nominal={"pin_radius": 1.0, "disc_indexing": math.radians(10.0 / 3600)},
+        baseline={"pin_radius": 1.1, "disc_indexing": 1.1 * math.radians(10.0 / 3600)},
+    )
     text = "\n".join(_report(study, {"budget": b}))
     row = next(line for line in text.splitlines() if line.startswith("| disc_indexing |"))
     assert "| 10″ | 12″ | 11″ |" in row and "T in rad" in row
@@ -459,33 +469,14 @@ def test_a_budget_of_several_constraints_reports_each_as_verified():
     from gearte.cli.budget_kind import _report
 
     study = load_study(ROOT / "examples" / "cycloid_yao2001_budget.toml")
-    names = ["pin_radius"]
-    b = {
-        "constraint": "yield",
+    b = _budget_entry(tolerances={"pin_radius": 1.0}, nominal={"pin_radius": 1.0}, baseline={"pin_radius": 1.0}) | {
         "spec_arcmin": 27.5,
-        "target_yield": 0.9973,
         "constraints": [
             {"metric": "lost_motion", "spec": 27.5, "spec_unit": "arcmin", "constraint": "yield", "target": 0.9973},
             {"metric": "loaded_pairs", "spec": 4.04, "spec_unit": "pairs", "constraint": "mean_k_sigma", "target": 3.0},
         ],
         "verified_yields": [0.999, 1.0],
         "verified_statistics": [21.3, 4.01],
-        "optimisation_samples": 96,
-        "verified_samples": 2000,
-        "solver_converged": True,
-        "solver_result": "successful",
-        "tolerances_um": {n: 1.0 for n in names},
-        "nominal_tolerances_um": {n: 1.0 for n in names},
-        "maximum_tolerances_um": {n: 10.0 for n in names},
-        "baseline_tolerances_um": {n: 1.0 for n in names},
-        "grades": {},
-        "cost_models": {n: gearte.Reciprocal(0.0, 1.0).describe() for n in names},
-        "contributions_arcmin": {n: 0.1 for n in names},
-        "cost": 2.0,
-        "baseline_cost": 2.1,
-        "baseline_scale": 1.0,
-        "verified_yield": 0.999,
-        "baseline_verified_yield": 0.999,
     }
     text = "\n".join(_report(study, {"budget": b}))
     assert "| yield of lost_motion ≥ 0.9973 | ≤ 27.5′ | yield 0.99900 | yes |" in text

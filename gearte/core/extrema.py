@@ -439,7 +439,7 @@ def smooth_peak(signal: TESignal, *, width: float | Float[Array, ""], oversample
       where it is a number).
     - `oversample`: grid points per period of the highest order.
     """
-    if not isinstance(width, jax.Array) or not is_traced(width):  # a traced width: the caller's to check
+    if not is_traced(width):  # a traced width: the caller's to check
         as_float("smooth_peak: width", width, positive=True, hint="rad")
     oversample = as_int("smooth_peak: oversample", oversample, minimum=2)
     require_x64()

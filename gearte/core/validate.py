@@ -44,6 +44,15 @@ def as_int(name: str, value, *, minimum: int) -> int:
     return value
 
 
+def check_names(given, expected, *, what: str) -> None:
+    """Raise a ValueError, `what` followed by the names missing from `given` and those it has beyond `expected`, unless
+    `given` (a mapping or a collection of names) names exactly `expected`."""
+    missing = [n for n in expected if n not in given]
+    unknown = [n for n in given if n not in expected]
+    if missing or unknown:
+        raise ValueError(what + (f"; missing {missing}" if missing else "") + (f"; unknown {unknown}" if unknown else ""))
+
+
 def check_array_values(name: str, value, *, nonnegative: bool = False, unit: str = "") -> None:
     """Check user-given numbers (Python numbers, lists, NumPy arrays): finite, and ≥ 0 if asked.
 

@@ -162,9 +162,6 @@ def report(drive: CycloidPin, s: dict) -> list[str]:
     return L
 
 
-__all__ = ("report",)
-
-
 def _cycle_note(revolutions: int, z_lobes: int | None) -> str:
     """What the grid covers of the cycle after which pins and tooth spaces pair again (z_a input revolutions)."""
     if not z_lobes or revolutions % z_lobes == 0:
@@ -174,3 +171,6 @@ def _cycle_note(revolutions: int, z_lobes: int | None) -> str:
         f"covers {revolutions} of them, so a maximum over it is a lower bound, and a minimum an upper bound, of the whole "
         "cycle's (more `[drive.grid] revolutions` extend it, at a proportional cost)."
     )
+
+
+__all__ = ("report",)

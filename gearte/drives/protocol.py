@@ -34,7 +34,7 @@ from ..core.extrema import Extrema, extrema, grid_size
 from ..core.metrics import RMS, AbstractMetric, Peak, PeakToPeak
 from ..core.programs import kept_jit
 from ..core.signal import Components, TESignal, evaluate, to_signal
-from ..core.validate import check_array_values
+from ..core.validate import check_array_values, check_names
 
 if TYPE_CHECKING:
     from ..core.schema import Table
@@ -260,14 +260,7 @@ class AbstractDrive(eqx.Module):
         """Check names, kinds and shapes (at trace time) and broadcast to the declared shapes."""
         specs = self.error_sources
         name = type(self).__name__
-        unknown = sorted(set(errors) - set(specs))
-        missing = sorted(set(specs) - set(errors))
-        if unknown or missing:
-            raise ValueError(
-                f"{name}: errors must name exactly {list(specs)}"
-                + (f"; unknown {unknown}" if unknown else "")
-                + (f"; missing {missing}" if missing else "")
-            )
+        check_names(errors, specs, what=f"{name}: errors must name exactly {list(specs)}")
         out = {}
         for n, spec in specs.items():
             e = errors[n]

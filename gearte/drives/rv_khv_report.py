@@ -164,9 +164,6 @@ def report(drive: RVKHV, s: dict, *, metric: str) -> list[str]:
     return L
 
 
-__all__ = ("report",)
-
-
 def _grid_note(ref: dict, mc: dict) -> list[str]:
     """The reference unit on the Monte Carlo's grid against the finer grid above: what the study grid misses."""
     g = ref.get("on_study_grid")
@@ -182,3 +179,6 @@ def _grid_note(ref: dict, mc: dict) -> list[str]:
         "as much. A finer `[drive.grid] points` narrows it, at a proportional cost.",
         "",
     ]
+
+
+__all__ = ("report",)

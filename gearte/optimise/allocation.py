@@ -37,7 +37,7 @@ from ..core.programs import kept_jit
 from ..core.signal import Components, to_signal
 from ..core.solution import RESULTS, check
 from ..core.units import TWO_PI as _TWO_PI
-from ..core.validate import as_float, as_int, check_array_values
+from ..core.validate import as_float, as_int, check_array_values, check_names
 from ..drives.protocol import AbstractSinusoidalDrive, Eccentricity
 from ..studies.errors import ErrorModel, check_drive_model
 from ..studies.laws import FixedPhase, RelativePhase, UniformPhase
@@ -235,13 +235,7 @@ def rule_offsets(p: RuleProblem, offsets: Mapping[str, Any] | Array, *, where: s
     or one value per adjusted source (finite where given as numbers); else a ValueError naming `where`."""
     names = list(p.adjust)
     if isinstance(offsets, Mapping):
-        missing, unknown = [n for n in names if n not in offsets], [n for n in offsets if n not in names]
-        if missing or unknown:
-            raise ValueError(
-                f"{where}: offsets: name every adjusted source {names} once"
-                + (f"; missing {missing}" if missing else "")
-                + (f"; {unknown} are not adjusted" if unknown else "")
-            )
+        check_names(offsets, names, what=f"{where}: offsets: name every adjusted source {names} once")
         for n in names:
             check_array_values(f"{where}: offsets[{n!r}]", offsets[n], unit="rad")
         return jnp.stack([jnp.asarray(offsets[n], dtype=float) for n in names])

@@ -19,7 +19,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..core.metrics import AbstractMetric, Peak, check_offered
 from ..core.programs import kept_jit
-from ..core.validate import as_float
+from ..core.validate import as_float, check_names
 from ..drives.protocol import AbstractDrive, Eccentricity
 from ..studies.errors import ErrorModel, check_drive_model
 from ..studies.laws import AbstractValueLaw
@@ -131,15 +131,7 @@ def budget_problem(
         raise ValueError(f"costs: {unknown} are not error sources of this drive; use some of {list(model.specs)}")
     if not names:
         raise ValueError("costs: give a cost model for at least one error source")
-    for what, m in (("nominal", nominal),):
-        missing = [n for n in names if n not in m]
-        extra = [n for n in m if n not in names]
-        if missing or extra:
-            raise ValueError(
-                f"{what}: give one entry per budgeted source {names}"
-                + (f"; missing {missing}" if missing else "")
-                + (f"; unknown {extra}" if extra else "")
-            )
+    check_names(nominal, names, what=f"nominal: give one entry per budgeted source {names}")
     for n in names:
         if not isinstance(costs[n], AbstractCostModel):
             raise ValueError(f"costs[{n!r}]: expected a cost model such as gearte.Reciprocal(a, b)")
@@ -198,14 +190,7 @@ def check_tolerances(p: BudgetProblem, tolerances) -> dict[str, float]:
         return {n: float(p.nominal[n]) for n in p.names}
     if not isinstance(tolerances, Mapping):
         raise ValueError(f"tolerances: a mapping source → tolerance (µm), got {type(tolerances).__name__}")
-    missing = [n for n in p.names if n not in tolerances]
-    extra = [n for n in tolerances if n not in p.names]
-    if missing or extra:
-        raise ValueError(
-            f"tolerances: give one tolerance (µm) per error source {p.names}"
-            + (f"; missing {missing}" if missing else "")
-            + (f"; unknown {extra}" if extra else "")
-        )
+    check_names(tolerances, p.names, what=f"tolerances: give one tolerance (µm) per error source {p.names}")
     out = {}
     for n in p.names:
         try:
