@@ -301,13 +301,35 @@ def test_every_random_result_takes_an_explicit_key_or_seed():
 def test_explicit_frequencies_whose_exact_extrema_would_not_fit_are_refused(freqs, shown):
     """The exact extrema sample every period of the fastest term over the hyper-period (16 points each): frequencies
     that make that grid billions of points are refused when the drive is built, not when it runs out of memory."""
-    from gearte.drives.explicit import MAX_PERIODS
+    from gearte.core.signal import MAX_PERIODS
 
     with pytest.raises(ValueError, match=f"more than {MAX_PERIODS:,}") as e:
         ExplicitDrive([ExplicitTerm("a", freqs[0]), ExplicitTerm("b", freqs[1])], gain=GAIN)
     assert shown in str(e.value)
     # At the bound itself the drive is built.
     ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", MAX_PERIODS)], gain=GAIN)
+
+
+def test_a_hyper_period_whose_exact_extrema_would_not_fit_is_refused_by_every_drive_and_metric():
+    """Coprime tooth counts (151/149/449: the fastest mesh makes 67,799 periods over 89,400 input revolutions) and a
+    signal of 70,000 periods are refused before a grid of a million points per sample is built; 101/103/307 (31,621
+    periods) is computed."""
+    from fractions import Fraction
+
+    from gearte.core.signal import MAX_PERIODS
+
+    with pytest.raises(ValueError, match="the fastest term makes 67799 periods, more than 65,536"):
+        d = gearte.Planetary2KH(z_sun=151, z_planet=149, z_ring=449, n_planets=3, module=1.0)
+        jax.eval_shape(lambda: d.signal(d.zero_errors()))
+    d = gearte.Planetary2KH(z_sun=101, z_planet=103, z_ring=307, n_planets=3, module=1.0)
+    assert max(jax.eval_shape(lambda: d.signal(d.zero_errors())).orders) == 31621
+    with pytest.raises(ValueError, match="more than 65,536"):
+        gearte.Components(amplitude=[1.0, 1.0], phase=[0.0, 0.0], freq=[1, MAX_PERIODS + 1])
+    gearte.Components(amplitude=[1.0, 1.0], phase=[0.0, 0.0], freq=[1, MAX_PERIODS])
+    long = gearte.TESignal(offset=jnp.zeros(()), cos_coef=jnp.ones(2), sin_coef=jnp.zeros(2), orders=(1, 70_000), fundamental=Fraction(1))
+    for fn in (lambda s: extrema(s), lambda s: gearte.smooth_peak(s, width=1e-6)):
+        with pytest.raises(ValueError, match="highest order is 70,000 periods"):
+            fn(long)
 
 
 def test_an_eccentricity_magnitude_is_drawn_by_a_value_law_that_stays_positive():

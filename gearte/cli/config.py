@@ -193,6 +193,20 @@ def check_file(path: str | Path, *, samples: int | None = None, seed: int | None
         raise ConfigError(f"{path}: {e}") from None
 
 
+def _check_hyper_period(drive, where: str) -> None:
+    """A sinusoidal drive's terms (traced, not computed) must make a hyper-period whose exact extrema fit in memory
+    (`gearte.core.signal.check_periods`): refused here, naming the table, rather than when the study compiles."""
+    import jax
+
+    from ..drives.protocol import AbstractSinusoidalDrive
+
+    if isinstance(drive, AbstractSinusoidalDrive):
+        try:
+            jax.eval_shape(lambda: drive.components(drive.zero_errors()))
+        except ValueError as e:
+            raise ConfigError(f"{where}: {e}") from None
+
+
 def build_study(raw: dict, source: str, *, samples: int | None = None, seed: int | None = None) -> Study:
     """A `Study` from parsed TOML (`source` names it in messages and reports)."""
     top, st, dt, h = _read_file(raw, samples=samples, seed=seed)
@@ -208,6 +222,7 @@ def build_study(raw: dict, source: str, *, samples: int | None = None, seed: int
     kind = dt.string("type", choices=tuple(DRIVES))
     drive = DRIVES[kind].from_table(dt)
     dt.finish()
+    _check_hyper_period(drive, dt.where)
 
     offered = drive.metrics
     metric = offered[st.string("metric", next(iter(offered)), choices=tuple(offered))]

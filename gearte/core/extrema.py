@@ -30,7 +30,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .precision import require_x64
-from .signal import TESignal, evaluate
+from .signal import MAX_PERIODS, TESignal, evaluate
 from .units import TWO_PI as _TWO_PI
 from .validate import as_float, as_int, is_traced
 
@@ -46,6 +46,17 @@ class Extrema(eqx.Module):
     min: Float[Array, "*batch"]
     theta_max: Float[Array, "*batch"]
     theta_min: Float[Array, "*batch"]
+
+
+def _check_orders(signal: TESignal, *, what: str) -> None:
+    """Refuse a signal whose highest order (the fastest term's periods over the hyper-period) exceeds `MAX_PERIODS`:
+    its grid would not fit in memory."""
+    if signal.orders and max(signal.orders) > MAX_PERIODS:
+        raise ValueError(
+            f"{what}: the signal's highest order is {max(signal.orders):,} periods of its fastest term over the "
+            f"hyper-period, more than {MAX_PERIODS:,}; a grid of 16 points per period for every sample would not fit in "
+            "memory. Frequencies with small denominators (or tooth counts with common factors) keep the hyper-period short"
+        )
 
 
 def grid_size(orders: tuple[int, ...], oversample: int) -> int:
@@ -369,6 +380,7 @@ def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 2, newt
     oversample = as_int("extrema: oversample", oversample, minimum=8)  # the candidate ranking needs 8 points per period
     candidates = as_int("extrema: candidates", candidates, minimum=1)
     newton_steps = as_int("extrema: newton_steps", newton_steps, minimum=0)
+    _check_orders(signal, what="extrema")
     f0 = float(signal.fundamental)
     if not signal.orders:
         zero = jnp.zeros_like(signal.offset)
@@ -443,6 +455,7 @@ def smooth_peak(signal: TESignal, *, width: float | Float[Array, ""], oversample
         as_float("smooth_peak: width", width, positive=True, hint="rad")
     oversample = as_int("smooth_peak: oversample", oversample, minimum=2)
     require_x64()
+    _check_orders(signal, what="smooth_peak")
     if not signal.orders:
         return width * jnp.logaddexp(signal.offset / width, -signal.offset / width)
     m = grid_size(signal.orders, oversample)

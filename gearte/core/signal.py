@@ -69,6 +69,34 @@ def _gcd_fractions(values: Sequence[Fraction]) -> Fraction:
     return Fraction(num, den)
 
 
+#: Most periods of the fastest term over the hyper-period. The exact extrema sample every period (16 points each,
+#: `gearte.extrema`), so this bounds their grid at about a million points per sample; a longer hyper-period (large
+#: coprime tooth counts, frequencies with large denominators) would fill the memory before it gave a result.
+MAX_PERIODS = 65_536
+
+
+def _short(x) -> str:
+    return str(x) if len(str(x)) <= 16 else f"{float(x):.6g}"
+
+
+def check_periods(freqs: Sequence[Fraction], *, what: str) -> None:
+    """Raise a ValueError naming `what` where the fastest of the frequencies `freqs` (multiples of the input speed)
+    makes more than `MAX_PERIODS` periods over their hyper-period."""
+    nonzero = sorted({abs(f) for f in freqs if f != 0})
+    if not nonzero:
+        return
+    f0 = _gcd_fractions(nonzero)
+    periods = nonzero[-1] / f0
+    if periods > MAX_PERIODS:
+        raise ValueError(
+            f"{what}: over the hyper-period of these frequencies ({', '.join(_short(f) for f in nonzero)}: {_short(1 / f0)} "
+            f"input revolutions) the fastest term makes {_short(periods)} periods, more than {MAX_PERIODS:,}; the exact "
+            "extrema sample every period (16 points each). The count grows with the frequencies' ratio and their "
+            "denominators (for a gear train, with large coprime tooth counts): give frequencies as fractions with small "
+            "denominators, e.g. '7/24', or tooth counts with common factors"
+        )
+
+
 class Components(eqx.Module):
     """Sinusoidal error components ``gain · amplitude · sin(freq · θ + phase)``.
 
@@ -96,6 +124,7 @@ class Components(eqx.Module):
         labels: Sequence[str] | None = None,
     ):
         self.freq = tuple(as_frequency(f, name=f"freq[{i}]") for i, f in enumerate(freq))
+        check_periods(self.freq, what="Components: freq")
         n = len(self.freq)
         self.amplitude = jnp.asarray(amplitude, dtype=float)
         self.phase = jnp.asarray(phase, dtype=float)

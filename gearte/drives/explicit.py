@@ -16,7 +16,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ..core.schema import ConfigError, Table
-from ..core.signal import Components, FrequencyLike, as_frequency
+from ..core.signal import Components, FrequencyLike, as_frequency, check_periods
 from ..core.units import ARCSEC_PER_RAD
 from .protocol import AbstractSinusoidalDrive, Eccentricity, SourceSpec
 
@@ -48,11 +48,6 @@ class ExplicitTerm(eqx.Module):
         self.scale = jnp.asarray(float(scale))
 
 
-#: Most periods of the fastest term over the hyper-period: the exact extrema's grid is 16 points per period
-#: (`gearte.extrema`), so this bounds it at about a million points per sample.
-MAX_PERIODS = 65_536
-
-
 class ExplicitDrive(AbstractSinusoidalDrive):
     """TE given as explicit sinusoidal terms of named error sources.
 
@@ -73,20 +68,7 @@ class ExplicitDrive(AbstractSinusoidalDrive):
         if not math.isfinite(float(gain)) or float(gain) == 0.0:
             raise ValueError(f"ExplicitDrive.gain: must be finite and non-zero (rad/µm), got {gain!r}")
         self.terms = tuple(terms)
-        nonzero = sorted({abs(t.frequency) for t in self.terms if t.frequency != 0})
-        if nonzero:
-            f0 = nonzero[0]
-            for f in nonzero[1:]:
-                f0 = Fraction(math.gcd(f0.numerator, f.numerator), math.lcm(f0.denominator, f.denominator))
-            periods = nonzero[-1] / f0
-            if periods > MAX_PERIODS:
-                short = lambda x: str(x) if len(str(x)) <= 16 else f"{float(x):.6g}"
-                raise ValueError(
-                    f"terms: over the hyper-period of these frequencies ({', '.join(short(f) for f in nonzero)}: {short(1 / f0)} "
-                    f"input revolutions) the fastest term makes {short(periods)} periods, more than {MAX_PERIODS:,}; the exact extrema "
-                    "sample every period (16 points each). The count grows with the frequencies' ratio and their denominators: give "
-                    "them as fractions with small denominators, e.g. '7/24'"
-                )
+        check_periods([t.frequency for t in self.terms], what="terms")
         self.gain = jnp.asarray(float(gain))
         self.name = name
 
