@@ -145,3 +145,23 @@ def test_result_codes_and_throw(model, study):
         optimise_modifications(model, x0=[0.0, 0.0, 0.0, 0.0], bounds=box)
     with pytest.raises(ValueError, match="bounds"):
         optimise_modifications(model, x0=x0, bounds=box[:, ::-1])
+
+
+def test_modifications_stiffness_and_smoothing_width_are_checked_where_given(model):
+    """A plain number where a ToothModification is due, a word as the stiffness's end drop and a zero or negative
+    smoothing width are refused naming the argument, before anything is computed (each had been accepted and failed
+    later, or given inf/NaN)."""
+    from gearte.drives.helical_modifications import ToothModification
+    from gearte.drives.helical_stiffness import SinglePairStiffness
+
+    with pytest.raises(ValueError, match=r"StageModifications\.ring: expected a ToothModification"):
+        StageModifications(sun=ToothModification(10.0), ring=0.5)  # type: ignore[arg-type]
+    for bad in ("x", True, [0.2]):
+        with pytest.raises(ValueError, match=r"SinglePairStiffness\.end_drop: a fraction in"):
+            SinglePairStiffness(bad)  # type: ignore[arg-type]
+    for bad in (0.0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="fluctuation: smooth: must be"):
+            model.fluctuation(jnp.zeros(4), smooth=bad)
+    # What is meant is taken: an array of end drops, a traced width.
+    SinglePairStiffness(np.array([0.2, 0.3]))
+    jax.eval_shape(lambda w: model.fluctuation(jnp.zeros(4), smooth=w), 0.02)

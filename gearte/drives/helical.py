@@ -26,7 +26,7 @@ from jaxtyping import Array, Float
 from ..core.programs import kept_jit
 from ..core.solution import RESULTS
 from ..core.units import ARCSEC_PER_RAD
-from ..core.validate import as_float, as_int
+from ..core.validate import as_float, as_int, is_traced
 from .helical_equations import SUN, StageSystem, error_sources, stage_system
 from .helical_geometry import HelicalStage, geometry
 from .helical_modifications import StageModifications, modifications_from_amounts
@@ -183,6 +183,8 @@ class HelicalPlanetary(eqx.Module):
         difference of the gradients at the two extreme samples), or a width w (µm) for
         `smooth_peak_to_peak` (infinitely differentiable, within 2 w log S above).
         """
+        if smooth is not None and not is_traced(smooth):
+            as_float("fluctuation: smooth", smooth, positive=True, hint="µm, the smoothing width, or None for the sampled peak-to-peak")
         r = self.response(modifications_from_amounts(amounts))
         n = self.stage.n_planets
         dte = r.dte[jnp.asarray([0, n])]

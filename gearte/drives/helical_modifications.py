@@ -102,6 +102,13 @@ class StageModifications(eqx.Module):
         planet_ring_flank: ToothModification | None = None,
         ring: ToothModification | None = None,
     ):
+        given = {"sun": sun, "planet_sun_flank": planet_sun_flank, "planet_ring_flank": planet_ring_flank, "ring": ring}
+        for name, m in given.items():
+            if m is not None and not isinstance(m, ToothModification):
+                raise ValueError(
+                    f"StageModifications.{name}: expected a ToothModification (e.g. ToothModification(tip_relief=10.0, "
+                    f"crowning=5.0), µm) or None for none, got {m!r}"
+                )
         self.sun = sun if sun is not None else ToothModification()
         self.planet_sun_flank = planet_sun_flank if planet_sun_flank is not None else ToothModification()
         self.planet_ring_flank = planet_ring_flank if planet_ring_flank is not None else ToothModification()

@@ -32,7 +32,9 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 if TYPE_CHECKING:  # equinox's workaround for pyright#4965 (`equinox.AbstractClassVar`'s docstring)
@@ -144,7 +146,11 @@ class SinglePairStiffness(AbstractStiffnessModel):
 
     def __check_init__(self):
         c = self.end_drop
-        if isinstance(c, (int, float)) and not (0.0 <= float(c) < 1.0):  # (an array, e.g. traced, is the caller's to check)
+        if c is not None and (isinstance(c, bool) or not isinstance(c, (int, float, jax.Array, np.ndarray, np.number))):
+            raise ValueError(f"SinglePairStiffness.end_drop: a fraction in [0, 1) of the mid-path stiffness or None, got {c!r}")
+        if isinstance(c, (int, float, np.ndarray, np.number)) and not np.all(
+            (np.asarray(c) >= 0.0) & (np.asarray(c) < 1.0)
+        ):  # (an array, e.g. traced, is the caller's to check)
             raise ValueError(f"SinglePairStiffness.end_drop: a fraction in [0, 1) of the mid-path stiffness, got {c!r}")
 
     def drop(self, meshes: "SlicedMeshes") -> Float[Array, " m"]:
