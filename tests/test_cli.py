@@ -269,3 +269,32 @@ def test_compilation_cache_folder_and_switches(monkeypatch, tmp_path):
         monkeypatch.setenv("GEARTE_COMPILATION_CACHE", env)
         assert cli.main(["run", str(study), "--out", str(tmp_path), *flag]) == 2
         assert len(calls) == expected, (env, flag)
+
+
+def test_report_numbers_that_round_to_zero_carry_no_minus_sign():
+    """A clearance of −3e-6 mm shown to four decimals reads 0.0000, not −0.0000; a value that does not round to zero
+    keeps its sign, whatever the format."""
+    from gearte.core.units import number_text
+
+    assert number_text(-3e-6, ".4f") == "0.0000"
+    assert number_text(-0.0, ".2f") == "0.00"
+    assert number_text(-0.0001, ".4f") == "-0.0001"
+    assert number_text(-1e-20, ".4g") == "-1e-20"
+    assert number_text(2.5e-5, ".4f") == "0.0000"
+    assert number_text(None) == "—"
+
+
+def test_the_clearance_plot_legend_names_the_budget_line(monkeypatch, tmp_path):
+    """The budget is drawn in the tangential panel and the legend sits by the normal one: it lists the pins and the
+    budget line."""
+    from matplotlib.figure import Figure
+
+    from gearte.drives.cycloid_pin_plots import clearance_vs_input
+
+    saved = []
+    monkeypatch.setattr(Figure, "savefig", lambda fig, path, **kw: saved.append(fig))
+    x = np.linspace(0.0, 10.0, 5)
+    clearance_vs_input(x, np.full((5, 3), 0.01), np.zeros((5, 3)), [1, 2], budget_mm=0.005, title="t", path=tmp_path / "c.png")
+    (fig,) = saved
+    texts = [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()]
+    assert texts == ["pin 1", "pin 2", "budget 0.005 mm"]

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..core.units import ANGLE_UNITS, UNIT_SYMBOLS, angle_from_rad
+from ..core.units import ANGLE_UNITS, UNIT_SYMBOLS, angle_from_rad, number_text
 from . import plots
 from .io import OutputError, atomic_output_dir, check_output, write_json, written_files
 
@@ -40,7 +40,7 @@ class RunFolderError(ValueError):
 
 
 def _fmt(x: float) -> str:
-    return f"{x:.2f}"
+    return number_text(x, ".2f")
 
 
 def _field(summary: dict, dotted: str, file: Path):

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..core.metrics import AbstractMetric
 from ..core.schema import MAX_SAMPLES, ConfigError, Table
-from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
+from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad, number_text
 from ..core.validate import as_key
 from ..drives.protocol import Figure
 from ..studies.doe import (
@@ -384,7 +384,7 @@ def doe_figures(s: ResponseSurface, opt, *, unit: str) -> list[Figure]:
 
 
 def _fmt(x: Any, spec: str = ".4g") -> str:
-    return "—" if x is None else format(x, spec)
+    return number_text(x, spec)
 
 
 def doe_report(d: dict) -> list[str]:

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad
+from ..core.units import ARCSEC_PER_RAD, UNIT_SYMBOLS, angle_from_rad, number_text
 from ..studies.montecarlo import PERCENTILES
 from .config import Study
 
@@ -36,7 +36,7 @@ def _thin_tails(n: int) -> str:
 
 
 def _fmt(x: float) -> str:
-    return f"{x:.2f}"
+    return number_text(x, ".2f")
 
 
 def report(study: Study, s: dict, errs: dict, tr) -> str:

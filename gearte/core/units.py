@@ -1,4 +1,4 @@
-"""Units: the one place for conversion constants.
+"""Units: the one place for conversion constants, and how a report writes a number.
 
 Inside gearte: error lengths in µm, geometry in mm, angles in rad. Reports use arcseconds
 (″) by default, arcminutes (′) or µrad on request.
@@ -31,3 +31,14 @@ def angle_to_rad(value, unit: str = "arcsec"):
         return value / _PER_RAD[unit]
     except KeyError:
         raise ValueError(f"unknown angle unit {unit!r}; use one of {sorted(_PER_RAD)}") from None
+
+
+def number_text(value, spec: str = ".3f") -> str:
+    """`value` formatted by `spec` (None: "—"), without the minus sign of a value that rounds to zero: a report's
+    "-0.0000" reads "0.0000"."""
+    if value is None:
+        return "—"
+    text = format(value, spec)
+    if text.startswith("-") and text[1:] == format(0.0, spec):
+        return text[1:]
+    return text

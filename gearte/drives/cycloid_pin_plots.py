@@ -92,7 +92,12 @@ def clearance_vs_input(input_deg, tangential_mm, normal_mm, pins, *, budget_mm: 
     for ax in axes:
         ax.set_xlabel("input angle θ_T (°, one pin pitch)")
         ax.set_xlim(x[0], x[-1])
-    axes[1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    # One legend for both panels: the pins (both) and the budget line, which only the tangential panel draws.
+    handles, labels = axes[1].get_legend_handles_labels()
+    budget = [(h, lb) for h, lb in zip(*axes[0].get_legend_handles_labels()) if lb.startswith("budget")]
+    axes[1].legend(
+        handles + [h for h, _ in budget], labels + [lb for _, lb in budget], fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0)
+    )
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path)

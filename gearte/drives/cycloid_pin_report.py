@@ -8,12 +8,14 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from ..core.units import number_text
+
 if TYPE_CHECKING:
     from .cycloid_pin import CycloidPin
 
 
 def _fmt(x, spec=".3f") -> str:
-    return "—" if x is None else format(x, spec)
+    return number_text(x, spec)
 
 
 def _floating_line(f: dict) -> str:
@@ -81,7 +83,7 @@ def report(drive: CycloidPin, s: dict) -> list[str]:
         L.append(
             f"| {p['pin']} | {p['tooth_space']} | {p['flank']} | "
             f"{_fmt(p['tangential_clearance_mm'], '.4f') if p['can_touch'] else 'never touches'} | "
-            f"{_fmt(p['tangential_clearance_arcsec'], '.1f')} | {p['normal_clearance_mm']:.4f} | {'yes' if p['loaded'] else ''} |"
+            f"{_fmt(p['tangential_clearance_arcsec'], '.1f')} | {_fmt(p['normal_clearance_mm'], '.4f')} | {'yes' if p['loaded'] else ''} |"
         )
     L += [
         "",
