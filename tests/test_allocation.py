@@ -315,7 +315,11 @@ def test_allocate_example_through_gearte_run(tmp_path):
     assert s["te"]["n"] == 2000 and s["te"]["metric"] == "peak"
     for f in ("allocation_histograms.png", "allocation_traces.png"):
         assert (out / f).exists()
-    assert "Assembly-phase allocation" in (out / "report.md").read_text()
+    report = (out / "report.md").read_text()
+    assert "Assembly-phase allocation" in report
+    # Both tables call the file's rule what it is, the given one (not the study's random seed).
+    assert "| given (`seed_rule`) |" in report and "| given rule (seed_rule) |" in report and "seed rule" not in report
+    assert set(a["monte_carlo_means"]) == {"given rule (seed_rule)", "random assembly", "found rule"}
 
 
 @pytest.mark.parametrize(

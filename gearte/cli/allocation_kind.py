@@ -156,7 +156,7 @@ class Allocation(AbstractStudyKind):
             for k, v in figs.items():
                 entry[f"seed_rule_te_{k}_{u}"] = to_unit(v)
             seed_study = _with_rule(study, spec, spec.seed_rule)
-            series["seed rule"] = (seed_study, seed_study.errors)
+            series["given rule (seed_rule)"] = (seed_study, seed_study.errors)
         random_sources = {n: (ErrorSource(s.magnitude, UniformPhase()) if n in spec.adjust else s) for n, s in study.errors.sources.items()}
         series["random assembly"] = (study, ErrorModel(random_sources, study.errors.specs))
         values = {}
@@ -191,7 +191,7 @@ class Allocation(AbstractStudyKind):
                             "te_a": te_seed,
                             "te_b": te_found,
                             "unit": u,
-                            "labels": ("seed rule", "found rule"),
+                            "labels": ("given rule (seed_rule)", "found rule"),
                             "title": f"Sample #{f.typical}: the same parts assembled by Wang et al.'s rule and by the found rule",
                         },
                     )
