@@ -375,3 +375,16 @@ def test_counts_and_options_of_the_library_functions_are_checked():
     ):
         with pytest.raises(ValueError, match=match):
             call()
+
+
+def test_explicit_terms_read_as_written_in_the_report():
+    """A negative offset reads "− 0.349066 rad", not "+ -0.349066"; no offset, no term."""
+    d = ExplicitDrive(
+        [ExplicitTerm("a", "1/8", phase_sign=-1, offset=-0.349066), ExplicitTerm("b", 2, offset=0.5), ExplicitTerm("c", 3)], gain=GAIN
+    )
+    rows = dict(d.describe()[2:])
+    assert rows == {
+        "term a": "1·E sin(1/8·θ − φ − 0.349066 rad)",
+        "term b": "1·E sin(2·θ + φ + 0.5 rad)",
+        "term c": "1·E sin(3·θ + φ)",
+    }

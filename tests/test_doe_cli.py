@@ -1,6 +1,7 @@
 """`[doe]` study files: `gearte run` writes the designed experiment, its response surface and plots; every run is
 reproduced independently; bad tables are refused naming the file, the table, the key and the fix."""
 
+import copy
 import json
 import math
 import re
@@ -69,8 +70,19 @@ def test_example_writes_the_experiment_the_surface_and_the_plots(example_run):
         "(doe_surface.png)",
         "99.73",
         "400 fresh samples",
+        "E_s = 4 µm, E_r = ",  # the optimum with its units
     ):
         assert needed in report, needed
+    # The stationary point of this surface lies far outside the box (negative eccentricities), and the report says
+    # so; moved to the centre of the ranges, it is reported without that warning.
+    stationary = d["canonical"]["stationary_point"]
+    assert stationary["E_s"] < 0 and "E_s = " in report and "outside the variables' ranges (|coded| up to" in report
+    from gearte.cli.doe_kind import doe_report
+
+    inside = copy.deepcopy(d)
+    inside["canonical"]["stationary_point"] = {v["name"]: (v["low"] + v["high"]) / 2 for v in d["variables"]}
+    text = "\n".join(doe_report(inside))
+    assert "stationary point E_s = " in text and "outside the variables' ranges" not in text
 
 
 def test_a_run_is_the_percentile_of_an_independent_monte_carlo(example_run):

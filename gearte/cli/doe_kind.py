@@ -437,13 +437,20 @@ def doe_report(d: dict) -> list[str]:
     ]
     ca, o = d["canonical"], d["optimum"]
     eig = ", ".join(f"{x:.4g}" for x in ca["eigenvalues"])
-    stationary = (
-        "; stationary point "
-        + ", ".join(f"{n} = {x:.4g}" for n, x in ca["stationary_point"].items())
-        + f" ({_fmt(ca['stationary_value'])}{sym})"
-        if ca["stationary_point"]
-        else ""
-    )
+    var = {v["name"]: v for v in d["variables"]}
+    stationary = ""
+    if ca["stationary_point"]:
+        stationary = (
+            "; stationary point "
+            + ", ".join(f"{n} = {x:.4g} {var[n]['unit']}" for n, x in ca["stationary_point"].items())
+            + f" ({_fmt(ca['stationary_value'])}{sym})"
+        )
+        coded = max(abs(2 * (x - var[n]["low"]) / (var[n]["high"] - var[n]["low"]) - 1) for n, x in ca["stationary_point"].items())
+        if coded > 1:
+            stationary += (
+                f", outside the variables' ranges (|coded| up to {coded:.3g}, the ranges being ±1): the fitted surface "
+                "extrapolated past the runs, not a design point"
+            )
     lines += [f"Canonical analysis: eigenvalues of the quadratic part {eig} (coded units): a {ca['nature']}{stationary}.", ""]
     where = (
         "inside the ranges (the stationary point)"
@@ -452,7 +459,7 @@ def doe_report(d: dict) -> list[str]:
     )
     lines += [
         f"Optimum ({o['goal']}) within the variables' ranges, {where}: "
-        + ", ".join(f"{n} = {x:.4g}" for n, x in o["x"].items())
+        + ", ".join(f"{n} = {x:.4g} {var[n]['unit']}" for n, x in o["x"].items())
         + f"; predicted {o['predicted']:.4f}{sym}; the model run there gives {o['confirmed']:.4f}{sym} with the design's "
         f"random numbers (the surface's own error there) and {o['confirmed_fresh_samples']:.4f}{sym} on {r['samples']:,} fresh "
         "samples (with the Monte Carlo's noise on the response).",

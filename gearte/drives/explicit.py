@@ -123,5 +123,7 @@ class ExplicitDrive(AbstractSinusoidalDrive):
         rows = [("drive", self.name), ("gain", f"{float(self.gain) * ARCSEC_PER_RAD:.6g}″/µm")]
         for t in self.terms:
             sign = "+" if t.phase_sign > 0 else "−"
-            rows.append((f"term {t.source}", f"{float(t.scale):g}·E sin({t.frequency}·θ {sign} φ + {float(t.offset):.6g})"))
+            off = float(t.offset)
+            shift = f" {'+' if off > 0 else '−'} {abs(off):.6g} rad" if off != 0 else ""
+            rows.append((f"term {t.source}", f"{float(t.scale):g}·E sin({t.frequency}·θ {sign} φ{shift})"))
         return rows
