@@ -270,7 +270,13 @@ def test_parameter_files_name_the_table_and_key_of_a_bad_number(tmp_path):
         ("carrier_speed_rpm = 22", "carrier_speed_rpm = 0", r"bad\.toml \[operation\]\.carrier_speed_rpm: must be > 0, got 0"),
         ("power_kw = 750.0", "power_kw = nan", r"bad\.toml \[operation\]\.power_kw: must be a finite number, got nan"),
         # Five planets of 39 teeth around 21: centres 359.9 mm apart, tip circles 418 mm (four fit: 433 mm).
-        ("n_planets = 3", "n_planets = 5", r"bad\.toml: n_planets: planets clash: 5 planets .* 359\.9 mm apart, .* 418\.0 mm"),
+        (
+            "n_planets = 3",
+            "n_planets = 5",
+            r"bad\.toml: n_planets: planets clash: 5 planets of 39 teeth .* 418\.0 mm diameter overlap\); at most 4 fit",
+        ),
+        # a count that sizes lists: refused by the same bound before a list of 2³² − 1 angles is made
+        ("n_planets = 3", "n_planets = 4294967295", r"bad\.toml: n_planets: planets clash: 4294967295 planets .* at most 4 fit"),
     ):
         assert old in text
         path.write_text(text.replace(old, new), encoding="utf-8")

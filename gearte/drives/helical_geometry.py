@@ -32,6 +32,8 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..core.validate import as_float, as_int
+from .planet_layout import check_assembly, most_planets, smallest_spacing
+from .planet_layout import planet_angles as planet_angles_of
 
 MEMBERS = ("carrier", "ring", "sun", "planet")
 DIRECTIONS = ("x", "y", "z", "u_x", "u_y", "u_z")
@@ -143,33 +145,25 @@ class HelicalStage(eqx.Module):
             raise ValueError(f"normal_pressure_angle: {math.degrees(alpha):g}° is not a pressure angle (give rad)")
         if sun_hand not in ("right", "left"):
             raise ValueError(f"sun_hand: 'right' or 'left', got {sun_hand!r}")
-        if planet_angles is None:
-            angles = [2 * math.pi * i / n for i in range(n)]
-        else:
-            if isinstance(planet_angles, (str, bytes)) or np.ndim(planet_angles) != 1:
-                raise ValueError(f"planet_angles: a list of angles (rad), one per planet, got {planet_angles!r}")
-            angles = [as_float(f"planet_angles[{i}]", x) for i, x in enumerate(planet_angles)]
-            if len(angles) != n:
-                raise ValueError(f"planet_angles: {len(angles)} angles for n_planets = {n}")
-        for i, ang in enumerate(angles):
-            q = (zs + zr) * (ang - angles[0]) / (2 * math.pi)
-            if abs(q - round(q)) > 1e-6:
-                raise ValueError(
-                    f"planet_angles: planet {i + 1} at {math.degrees(ang - angles[0]):.6g}° cannot be assembled: (z_sun + z_ring)·Ψ/360° = {q:.6g} must be whole"
-                )
         mn = as_float("normal_module", normal_module, positive=True, hint="mm")
         # Neighbouring planets must not clash: planet tip circles (standard addendum m_n) within the distance of their
-        # centres, 2 a sin(ΔΨ/2), a = m_t (z_sun + z_planet)/2, m_t = m_n / cos β.
-        if n > 1:
-            a = mn / math.cos(beta) * (zs + zp) / 2
-            tip = mn / math.cos(beta) * zp + 2 * mn
-            order = sorted(x % (2 * math.pi) for x in angles)
-            gap = min((order[(i + 1) % n] - order[i]) % (2 * math.pi) for i in range(n))
-            if 2 * a * math.sin(gap / 2) <= tip:
-                raise ValueError(
-                    f"n_planets: planets clash: {n} planets of {zp} teeth around a {zs}-tooth sun, their centres "
-                    f"{2 * a * math.sin(gap / 2):.1f} mm apart, have tip circles of {tip:.1f} mm diameter"
-                )
+        # centres, 2 a sin(ΔΨ/2), a = m_t (z_sun + z_planet)/2, m_t = m_n / cos β. The count first, before a list of n
+        # angles is made.
+        a = mn / math.cos(beta) * (zs + zp) / 2
+        tip = mn / math.cos(beta) * zp + 2 * mn
+        n_fit = most_planets(a, tip)
+        if n > n_fit:
+            raise ValueError(
+                f"n_planets: planets clash: {n} planets of {zp} teeth do not fit around a {zs}-tooth sun that many times "
+                f"(tip circles of {tip:.1f} mm diameter overlap); at most {n_fit} fit"
+            )
+        angles = planet_angles_of(planet_angles, n)
+        check_assembly(angles, zs, zr, equally_spaced=planet_angles is None)
+        if n > 1 and (spacing := smallest_spacing(angles, a)) <= tip:
+            raise ValueError(
+                f"n_planets: planets clash: {n} planets of {zp} teeth around a {zs}-tooth sun, their centres "
+                f"{spacing:.1f} mm apart, have tip circles of {tip:.1f} mm diameter"
+            )
         self.z_sun, self.z_planet, self.z_ring, self.n_planets = zs, zp, zr, n
         self.sun_hand = 1 if sun_hand == "right" else -1
         self.normal_module = jnp.asarray(mn)

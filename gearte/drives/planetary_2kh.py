@@ -30,13 +30,14 @@ from typing import Any, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
 
 from ..core.schema import ConfigError, Table
 from ..core.signal import Components
 from ..core.units import ARCSEC_PER_RAD
 from ..core.validate import as_float, as_int, check_option
+from .planet_layout import check_assembly, most_planets, smallest_spacing
+from .planet_layout import planet_angles as planet_angles_of
 from .protocol import AbstractSinusoidalDrive, Eccentricity, SourceSpec
 
 MEMBERS = ("sun", "carrier", "ring")
@@ -194,41 +195,18 @@ class Planetary2KH(AbstractSinusoidalDrive):
             if not (0 < cw < 1 and 0 < cn < 1):
                 raise ValueError(f"centre_distance: {a} mm gives no valid working pressure angle for these tooth counts and module")
             aw, an = math.acos(cw), math.acos(cn)
-        # Neighbouring planets must not clash (tip circles, standard addendum = m): at most n_fit planets fit around
-        # the sun, the most whose smallest gap 2π/n keeps 2 a sin(π/n) > m (z_p + 2). Checked before any list of
-        # n angles is made (a count of 2³² would otherwise exhaust memory before the check below could refuse it).
-        x = m * (zp + 2) / (2 * a)
-        n_fit = 1 if x >= 1 else max(1, math.ceil(math.pi / math.asin(x)) - 1)
+        # Neighbouring planets must not clash (tip circles, standard addendum = m). The count is checked before any
+        # list of n angles is made (a count of 2³² would otherwise exhaust memory before the angles could be checked).
+        n_fit = most_planets(a, m * (zp + 2))
         if n > n_fit:
             raise ValueError(
                 f"n_planets: {n} planets clash: planets of {zp} teeth do not fit around a {zs}-tooth sun that many times "
                 f"(planet tip circles overlap); at most {n_fit} fit"
             )
-        if planet_angles is None:
-            angles = [2 * math.pi * i / n for i in range(n)]
-        else:
-            if isinstance(planet_angles, (str, bytes)) or np.ndim(planet_angles) != 1:
-                raise ValueError(f"planet_angles: a list of angles (rad), one per planet, got {planet_angles!r}")
-            angles = [_as_float(f"planet_angles[{i}]", x) for i, x in enumerate(planet_angles)]
-            if len(angles) != n:
-                raise ValueError(f"planet_angles: {len(angles)} angles for n_planets = {n}")
-        # Assembly condition: planet i meshes with sun and ring only if (z_s + z_r) η_i / 2π is whole.
-        for i, ang in enumerate(angles[1:], start=1):
-            q = (zs + zr) * (ang - angles[0]) / (2 * math.pi)
-            if abs(q - round(q)) > 1e-6:
-                raise ValueError(
-                    f"planet_angles: planet {i + 1} at {math.degrees(ang - angles[0]):.4g}° from planet 1 cannot be assembled: "
-                    f"(z_sun + z_ring)·η/360° = {q:.4g} must be a whole number"
-                    + (f"; {n} equally spaced planets need (z_sun + z_ring)/{n} whole ({zs + zr}/{n})" if planet_angles is None else "")
-                )
-        # Neighbouring planets must not clash (tip circles, standard addendum = m).
-        order = sorted(a_ % (2 * math.pi) for a_ in angles)
-        if n > 1:
-            gaps = [(order[(i + 1) % n] - order[i]) % (2 * math.pi) for i in range(n)]  # 0: two planets at one place
-            if 2 * a * math.sin(min(gaps) / 2) <= m * (zp + 2):
-                raise ValueError(
-                    f"planets clash: {n} planets of {zp} teeth do not fit around a {zs}-tooth sun (planet tip circles overlap)"
-                )
+        angles = planet_angles_of(planet_angles, n)
+        check_assembly(angles, zs, zr, equally_spaced=planet_angles is None)
+        if n > 1 and smallest_spacing(angles, a) <= m * (zp + 2):
+            raise ValueError(f"planets clash: {n} planets of {zp} teeth do not fit around a {zs}-tooth sun (planet tip circles overlap)")
         self.z_sun, self.z_planet, self.z_ring, self.n_planets = zs, zp, zr, n
         self.module = jnp.asarray(m)
         self.pressure_angle = jnp.asarray(a0)
