@@ -414,10 +414,47 @@ def test_a_slow_drive_is_timed_from_fewer_samples(capsys, tmp_path, monkeypatch)
     monkeypatch.setattr(main_mod, "estimate_cost", hour)
     refused(capsys, tmp_path, "run", rv, "--out", tmp_path / "o", "--samples", threshold + 1, message="about 60 min", computing=True)
     assert asked == [(threshold + 1, threshold)]
-    # At the threshold nothing is timed: the run starts at once (here stopped where it would compute).
+    # The study's [sensitivity] computes a gradient per sample and metric besides: 256 × 3 more samples, counted.
+    extra = 256 * 3
+    assert run_mod.kind_evaluations(study) == {"sensitivity": extra}
+    refused(
+        capsys, tmp_path, "run", rv, "--out", tmp_path / "o", "--samples", threshold - extra + 1, message="about 60 min", computing=True
+    )
+    assert asked[-1] == (threshold - extra + 1, threshold)
+    # At the threshold (the study's samples and its kinds' together) nothing is timed: the run starts at once (here
+    # stopped where it would compute).
     with pytest.raises(AssertionError, match="ran"):
-        cli.main(["run", str(rv), "--out", str(tmp_path / "o"), "--samples", str(threshold), "--no-progress"])
-    assert len(asked) == 1
+        cli.main(["run", str(rv), "--out", str(tmp_path / "o"), "--samples", str(threshold - extra), "--no-progress"])
+    assert len(asked) == 2
+
+
+def test_a_study_kinds_samples_are_estimated_with_the_studys_own(capsys, tmp_path, monkeypatch):
+    """A designed experiment of 10 runs + the optimum twice, 4,000 samples each, computes 48,000 samples besides the
+    study's 200: a run is timed and estimated on all of them, and the message says how many are the kind's."""
+    doe = ROOT / "examples" / "planetary_wang2013_doe.toml"
+    study = load_study(doe, samples=200)
+    assert run_mod.kind_evaluations(study) == {"doe": 12 * 4000} and run_mod.evaluations(study) == 48_200
+    c = run_mod.estimate_cost(study, measure_above=10_000)
+    assert c.rate is not None and c.seconds == pytest.approx(48_200 / c.rate)
+    assert run_mod.estimate_cost(study, measure_above=48_200).seconds is None  # not beyond: not timed
+
+    def ran(*a, **k):
+        raise AssertionError("ran")
+
+    monkeypatch.setattr(run_mod, "_run", ran)
+    monkeypatch.setattr(run_mod, "MEASURE_ABOVE", 10_000)
+    monkeypatch.setattr(main_mod, "CONFIRM_SECONDS", 0.0)
+    refused(
+        capsys,
+        tmp_path,
+        "run",
+        doe,
+        "--out",
+        tmp_path / "o",
+        "--samples",
+        200,
+        message="(200 samples of the study's own and at least 48,000 of [doe])",
+    )
 
 
 # ---------------------------------------------------------------- compare

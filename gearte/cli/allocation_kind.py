@@ -108,6 +108,12 @@ class Allocation(AbstractStudyKind):
                 "study; optimise the rule in its own study first"
             )
 
+    def evaluations(self, study: Study, spec: AllocationSpec) -> int:
+        # every start's surrogate once, the check of the found (and the given) rule, and the Monte Carlo of each other
+        # assembly shown beside the study's own (random, and the given rule)
+        rules = 1 + (spec.seed_rule is not None)
+        return spec.starts * spec.surrogate_samples + rules * (spec.check_samples + study.samples)
+
     def run(self, study: Study, spec: AllocationSpec, *, progress: bool | None) -> KindOutcome:
         # The optimiser (optimistix) is imported here: reading and checking the table need none of it.
         from ..core.solution import is_successful, message

@@ -217,6 +217,14 @@ class Budget(AbstractStudyKind):
             compare_random_assembly=t.boolean("compare_random_assembly", True),
         )
 
+    def evaluations(self, study: Study, spec: BudgetSpec) -> int:
+        # one pass of the optimiser, the optimum's and the uniform scaling's checks, the contributions; the same again
+        # for random assembly where it is compared; each Pareto point on half the samples
+        one = spec.samples + 2 * spec.check_samples + min(spec.samples, 8192)
+        has_rule = any(isinstance(s.phase, (RelativePhase, FixedPhase)) for s in study.errors.sources.values())
+        front = max(1000, spec.check_samples // 2)
+        return one * (1 + (spec.compare_random_assembly and has_rule)) + len(spec.pareto_specs) * (max(256, spec.samples // 2) + 2 * front)
+
     def run(self, study: Study, spec: BudgetSpec, *, progress: bool | None) -> KindOutcome:
         # The optimiser (optimistix) is imported here: reading and checking the table need none of it.
         from ..core.solution import is_successful, message

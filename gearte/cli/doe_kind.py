@@ -237,6 +237,10 @@ class Doe(AbstractStudyKind):
                 )
         return DoeSpec(design, tuple(variables), metric, statistic, samples, goal)
 
+    def evaluations(self, study: Study, spec: DoeSpec) -> int:
+        # every run of the design, and the optimum twice (the design's random numbers and fresh ones)
+        return (spec.design.runs(len(spec.variables)) + 2) * spec.samples
+
     def run(self, study: Study, spec: DoeSpec, *, progress: bool | None) -> KindOutcome:
         unit = study.unit if spec.metric.quantity == "angle" else "pairs"
 

@@ -62,6 +62,14 @@ class AbstractStudyKind(abc.ABC):
         """Raise a ConfigError if this kind cannot run with the other kinds present."""
         del study
 
+    def evaluations(self, study: Study, spec: Any) -> int:
+        """At least how many drive samples (one sample's forward evaluation, or its equivalent) the kind computes
+        besides the study's own Monte Carlo: `gearte run` adds them when it estimates a run before starting it (a
+        lower bound: an optimiser's iterations beyond the first are not counted). 0 for a kind that computes no
+        Monte Carlo of its own."""
+        del study, spec
+        return 0
+
     @abc.abstractmethod
     def run(self, study: Study, spec: Any, *, progress: bool | None) -> KindOutcome:
         """Run the kind before the study's Monte Carlo."""

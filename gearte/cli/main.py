@@ -38,6 +38,7 @@ _LAZY = {
     "CONFIRM_BYTES": ".run",
     "CONFIRM_SECONDS": ".run",
     "estimate_cost": ".run",
+    "evaluations": ".run",
     "timing_threshold": ".run",
     "run_study": ".run",
     "compare_runs": ".compare",
@@ -137,17 +138,24 @@ def _duration(s: float) -> str:
 def _confirm(args, study: Study) -> None:
     """Estimate a large run before starting it; refuse one above the thresholds without --yes."""
     threshold = _lazy("timing_threshold")(study)
-    if study.samples <= threshold:
+    if _lazy("evaluations")(study) <= threshold:
         return  # small enough to start at once (and not worth tracing the study twice)
     cost = _lazy("estimate_cost")(study, measure_above=threshold)
     if cost.seconds is None:
         return
     where = f"--samples {study.samples:,}" if args.samples is not None else f"{args.config}: [study] samples = {study.samples:,}"
+    kinds = {t: n for t, n in cost.kind_samples.items() if n}
+    counted = (
+        f" ({study.samples:,} samples of the study's own and at least " + ", ".join(f"{n:,} of [{t}]" for t, n in kinds.items()) + ")"
+        if kinds
+        else ""
+    )
     what = (
-        f"about {_duration(cost.seconds)} of Monte Carlo at {cost.rate:,.0f} samples/s on this machine (study kinds not "
-        f"included), and {_size(cost.bytes)} of per-sample results held in memory and written to samples.npz"
+        f"about {_duration(cost.seconds)} of Monte Carlo at {cost.rate:,.0f} samples/s on this machine{counted}, and "
+        f"{_size(cost.bytes)} of per-sample results held in memory and written to samples.npz"
         if cost.bytes
-        else f"about {_duration(cost.seconds)} of Monte Carlo at {cost.rate:,.0f} samples/s on this machine, streamed (nothing held per sample)"
+        else f"about {_duration(cost.seconds)} of Monte Carlo at {cost.rate:,.0f} samples/s on this machine{counted}, streamed "
+        "(nothing held per sample)"
     )
     if cost.seconds > _lazy("CONFIRM_SECONDS") or cost.bytes > _lazy("CONFIRM_BYTES"):
         if not args.yes:

@@ -145,12 +145,14 @@ SMALL_ANGLE_RAD = 0.05
 @dataclasses.dataclass(frozen=True)
 class Cost:
     """What a run will take: `bytes` of per-sample results (held in memory and written to samples.npz,
-    before compression), and, when timed, `seconds` of Monte Carlo at `rate` samples per second."""
+    before compression), and, when timed, `seconds` of Monte Carlo at `rate` samples per second: the study's own
+    `samples` and at least `kind_samples` more that its study kinds compute (`kind_evaluations`)."""
 
     samples: int
     bytes: int
     seconds: float | None = None
     rate: float | None = None
+    kind_samples: dict[str, int] = dataclasses.field(default_factory=dict)
 
 
 def _sampler(study: Study) -> _RunSample:
@@ -167,6 +169,17 @@ def _phases_to_choose_held(study: Study) -> Study:
     return dataclasses.replace(study, errors=ErrorModel(held, study.errors.specs))
 
 
+def kind_evaluations(study: Study) -> dict[str, int]:
+    """At least how many drive samples each study kind of `study` computes besides the study's own Monte Carlo, by
+    table (`AbstractStudyKind.evaluations`)."""
+    return {k.table: k.evaluations(study, study.kinds[k.table]) for k in STUDY_KINDS if k.table in study.kinds}
+
+
+def evaluations(study: Study) -> int:
+    """At least how many drive samples a run of `study` computes: its Monte Carlo's and its study kinds'."""
+    return study.samples + sum(kind_evaluations(study).values())
+
+
 def measured_samples(study: Study) -> int:
     """The samples `estimate_cost` times: two blocks (the Monte Carlo's compiled call, `default_block_size`)."""
     return 2 * default_block_size(_sampler(study).bytes_per_sample())
@@ -181,23 +194,25 @@ def timing_threshold(study: Study) -> int:
 
 
 def estimate_cost(study: Study, *, measure_above: int | None = None) -> Cost:
-    """Estimate the study's own Monte Carlo (study kinds not included): the per-sample results' size from their
-    shapes, and, above `measure_above` samples (default: `timing_threshold`), its time from a timed
-    compiled call of two blocks of samples (after a first call that compiles it; a few seconds, more for a grid
-    drive)."""
+    """Estimate a run of the study: its per-sample results' size from their shapes, and, where the run computes more
+    than `measure_above` samples (default: `timing_threshold`; its own and at least its study kinds', `evaluations`),
+    its time from a timed compiled call of two blocks of samples (after a first call that compiles it; a few seconds,
+    more for a grid drive). The study kinds' samples are counted at the rate of the study's own (a lower bound:
+    a kind's gradient costs more than a sample, and an optimiser's iterations beyond the first are not counted)."""
     fn = _sampler(_phases_to_choose_held(study))
     shapes = jax.eval_shape(fn, as_key(0))
     per = 3 * 8 + sum(int(np.prod(x.shape)) * x.dtype.itemsize for x in jax.tree.leaves(shapes[1]))  # te, te_rad, index
     nbytes = 0 if _streams(study) else per * study.samples
-    if study.samples <= (timing_threshold(study) if measure_above is None else measure_above):
-        return Cost(study.samples, nbytes)
+    kinds = kind_evaluations(study)
+    if study.samples + sum(kinds.values()) <= (timing_threshold(study) if measure_above is None else measure_above):
+        return Cost(study.samples, nbytes, kind_samples=kinds)
     # The smallest compiled call (two blocks), run twice: the second is timed.
     n = measured_samples(study)
     monte_carlo(fn, key=study.seed, n_samples=n, chunk_size=n, progress=False)
     t0 = time.perf_counter()
     monte_carlo(fn, key=study.seed, n_samples=n, chunk_size=n, progress=False)
     rate = n / max(time.perf_counter() - t0, 1e-9)
-    return Cost(study.samples, nbytes, study.samples / rate, rate)
+    return Cost(study.samples, nbytes, (study.samples + sum(kinds.values())) / rate, rate, kinds)
 
 
 def run_study(

@@ -44,6 +44,10 @@ class Sensitivity(AbstractStudyKind):
                 )
         return SensitivitySpec(n, tuple(names))
 
+    def evaluations(self, study: Study, spec: SensitivitySpec) -> int:
+        # a gradient per sample and metric (counted as one evaluation: a lower bound)
+        return spec.pathwise_samples * len(spec.pathwise_metrics)
+
     def run(self, study: Study, spec: SensitivitySpec, *, progress: bool | None) -> KindOutcome:
         del progress
         metrics = study.drive.metrics
