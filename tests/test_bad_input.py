@@ -400,6 +400,7 @@ def test_a_slow_drive_is_timed_from_fewer_samples(capsys, tmp_path, monkeypatch)
     study = load_study(rv)
     threshold = run_mod.timing_threshold(study)
     assert threshold == run_mod.MEASURE_FACTOR * run_mod.measured_samples(study) < study.samples
+    assert threshold + 1 == 801 and run_mod.timing_threshold(load_study(RANDOM)) + 1 == 409_601  # the README's figures
     assert run_mod.timing_threshold(load_study(RANDOM)) == min(run_mod.MEASURE_ABOVE, 100 * run_mod.measured_samples(load_study(RANDOM)))
     asked = []
 
