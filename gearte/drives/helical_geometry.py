@@ -32,7 +32,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..core.validate import as_float, as_int
-from .planet_layout import check_assembly, most_planets, smallest_spacing
+from .planet_layout import check_assembly, check_planet_count, smallest_spacing
 from .planet_layout import planet_angles as planet_angles_of
 
 MEMBERS = ("carrier", "ring", "sun", "planet")
@@ -151,12 +151,7 @@ class HelicalStage(eqx.Module):
         # angles is made.
         a = mn / math.cos(beta) * (zs + zp) / 2
         tip = mn / math.cos(beta) * zp + 2 * mn
-        n_fit = most_planets(a, tip)
-        if n > n_fit:
-            raise ValueError(
-                f"n_planets: planets clash: {n} planets of {zp} teeth do not fit around a {zs}-tooth sun that many times "
-                f"(tip circles of {tip:.1f} mm diameter overlap); at most {n_fit} fit"
-            )
+        check_planet_count(n, a, tip, z_sun=zs, z_planet=zp)
         angles = planet_angles_of(planet_angles, n)
         check_assembly(angles, zs, zr, equally_spaced=planet_angles is None)
         if n > 1 and (spacing := smallest_spacing(angles, a)) <= tip:

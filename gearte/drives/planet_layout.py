@@ -20,6 +20,17 @@ def most_planets(centre_distance: float, tip_diameter: float) -> int:
     return 1 if x >= 1 else max(1, math.ceil(math.pi / math.asin(x)) - 1)
 
 
+def check_planet_count(n: int, centre_distance: float, tip_diameter: float, *, z_sun: int, z_planet: int) -> None:
+    """Refuse more planets than fit around the sun (`most_planets`), before any list of n angles is made (a count of
+    2³² would otherwise exhaust the memory before the angles could be checked)."""
+    n_fit = most_planets(centre_distance, tip_diameter)
+    if n > n_fit:
+        raise ValueError(
+            f"n_planets: planets clash: {n} planets of {z_planet} teeth do not fit around a {z_sun}-tooth sun (tip circles of "
+            f"{tip_diameter:.1f} mm diameter overlap); at most {n_fit} fit"
+        )
+
+
 def planet_angles(planet_angles, n: int) -> list[float]:
     """The planets' angles (rad): equally spaced where `planet_angles` is None, else the given list of n angles."""
     if planet_angles is None:

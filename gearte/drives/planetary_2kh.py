@@ -36,7 +36,7 @@ from ..core.schema import ConfigError, Table
 from ..core.signal import Components
 from ..core.units import ARCSEC_PER_RAD
 from ..core.validate import as_float, as_int, check_option
-from .planet_layout import check_assembly, most_planets, smallest_spacing
+from .planet_layout import check_assembly, check_planet_count, smallest_spacing
 from .planet_layout import planet_angles as planet_angles_of
 from .protocol import AbstractSinusoidalDrive, Eccentricity, SourceSpec
 
@@ -195,14 +195,8 @@ class Planetary2KH(AbstractSinusoidalDrive):
             if not (0 < cw < 1 and 0 < cn < 1):
                 raise ValueError(f"centre_distance: {a} mm gives no valid working pressure angle for these tooth counts and module")
             aw, an = math.acos(cw), math.acos(cn)
-        # Neighbouring planets must not clash (tip circles, standard addendum = m). The count is checked before any
-        # list of n angles is made (a count of 2³² would otherwise exhaust memory before the angles could be checked).
-        n_fit = most_planets(a, m * (zp + 2))
-        if n > n_fit:
-            raise ValueError(
-                f"n_planets: {n} planets clash: planets of {zp} teeth do not fit around a {zs}-tooth sun that many times "
-                f"(planet tip circles overlap); at most {n_fit} fit"
-            )
+        # Neighbouring planets must not clash (tip circles, standard addendum = m): the count, then the angles.
+        check_planet_count(n, a, m * (zp + 2), z_sun=zs, z_planet=zp)
         angles = planet_angles_of(planet_angles, n)
         check_assembly(angles, zs, zr, equally_spaced=planet_angles is None)
         if n > 1 and smallest_spacing(angles, a) <= m * (zp + 2):
