@@ -158,3 +158,40 @@ def test_bad_input_is_refused_with_a_clear_message():
     one = StreamingStatistics()
     with pytest.raises(ValueError, match=r"non-finite values \(the first is inf at sample 1\)"):
         one.update([1.0, np.inf])
+
+
+def test_sample_near_is_the_first_sample_of_the_nearest_occupied_bin():
+    """`bits = 0`: a bin is a sign and a binade, [2^e, 2^(e+1)) (or its negative), so every answer is read off by
+    hand. Two metrics whose binades hold other samples, fed in two chunks so that the first index of some bins
+    comes from the second chunk (stream order, not chunk order)."""
+    #                  index:  0      1    2    3    4      5    6
+    m0 = np.array([5.0, 1.5, 3.0, 6.0, 100.0, 2.5, -3.0])  # binades 2, 0, 1, 2, 6, 1, −(1)
+    m1 = np.array([100.0, 3.0, 1.5, 2.5, 6.0, 5.0, -3.0])  # binades 6, 1, 0, 1, 2, 2, −(1)
+    acc = feed(np.stack([m0, m1], axis=1), [3], bits=0)
+    expected = {
+        # value: (metric 0, metric 1)
+        7.0: (0, 4),  # binade 2 holds 0 and 3 (6.0 is nearer 7 in value; the first in the bin is the answer)
+        2.1: (2, 1),  # binade 1: 2 then 5 for metric 0; 1 then 3 for metric 1
+        1.2: (1, 2),  # binade 0
+        40.0: (4, 0),  # binade 5 is empty: binade 6 (one away) is nearer than binade 2 (three away)
+        12.0: (0, 4),  # binade 3 is empty: binade 2 (one away) is nearer than binade 6 (three away)
+        0.3: (1, 2),  # below every positive sample: the lowest positive binade, 0
+        1e9: (4, 0),  # above every sample: the highest binade, 6
+        -2.5: (6, 6),  # the negative binade of −3.0
+        -1000.0: (6, 6),  # the only negative bin is nearer than any positive one
+    }
+    for value, (i0, i1) in expected.items():
+        assert acc.sample_near(value, 0) == i0, (value, 0)
+        assert acc.sample_near(value, metric=1) == i1, (value, 1)
+    # Equidistant bins (binade 4: binades 2 and 6 both two away): the lower one, as `min` over (distance, bin) picks.
+    assert acc.sample_near(24.0, 0) == 0
+    # One metric per sample: `metric` None or 0 reads the only column; another index is refused, as it is past the
+    # columns of a two-metric accumulator.
+    one = feed(m1, [3], bits=0)
+    assert [one.sample_near(v) for v in (7.0, 2.1, 40.0)] == [4, 1, 0] == [one.sample_near(v, 0) for v in (7.0, 2.1, 40.0)]
+    with pytest.raises(ValueError, match="one value per sample"):
+        one.sample_near(7.0, 1)
+    with pytest.raises(ValueError, match=r"metric: expected an index in \[0, 2\)"):
+        acc.sample_near(7.0, 2)
+    with pytest.raises(ValueError, match="no values"):
+        StreamingStatistics().sample_near(1.0)
