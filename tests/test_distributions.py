@@ -221,3 +221,35 @@ def test_rule_errors():
         ErrorModel({"a": ErrorSource(1.0, 0.0)}, counts)
     with pytest.raises(ValueError, match="unknown"):
         ErrorModel({"a": ErrorSource(1.0, 0.0), "b": ErrorSource(1.0, 0.0), "x": ErrorSource(1.0, 0.0)}, counts)
+
+
+def test_source_keys_follow_the_drives_declared_order():
+    """Source j of a sample draws from fold_in(key, j), j its index in the drive's declared order: here z, b, m, which
+    is neither alphabetical (b, m, z), nor the order the sources are given in (b, m, z), nor the order they are drawn in
+    (m before z, whose phase follows m's: m, z, b). An eccentricity splits its key into magnitude and phase keys."""
+    drive = gearte.ExplicitDrive([gearte.ExplicitTerm(n, f) for n, f in (("z", 1), ("b", 2), ("m", 3))], gain=1e-5)
+    assert list(drive.error_sources) == ["z", "b", "m"]
+    model = ErrorModel(
+        {
+            "b": ErrorSource(gearte.Uniform(1.0, 2.0), gearte.UniformPhase()),
+            "m": ErrorSource(gearte.Uniform(3.0, 5.0), gearte.UniformPhase()),
+            "z": ErrorSource(gearte.Uniform(6.0, 9.0), gearte.RelativePhase("m", 0.3)),
+        },
+        drive.error_sources,
+    )
+    assert model.order != ("z", "b", "m")  # drawn in another order than declared
+    key = jax.random.key(17)
+    e = model.sample(key)
+
+    def by_hand(j, low, high):
+        k_mag, k_ph = jax.random.split(jax.random.fold_in(key, j))
+        u = float(jax.random.uniform(k_mag, (1,), dtype=float)[0])
+        return low + (high - low) * u, 2 * math.pi * float(jax.random.uniform(k_ph, (1,), dtype=float)[0])
+
+    z_mag, _ = by_hand(0, 6.0, 9.0)
+    b_mag, b_ph = by_hand(1, 1.0, 2.0)
+    m_mag, m_ph = by_hand(2, 3.0, 5.0)
+    assert list(e) == ["z", "b", "m"]
+    for name, mag, ph in (("z", z_mag, m_ph + 0.3), ("b", b_mag, b_ph), ("m", m_mag, m_ph)):
+        assert float(e[name].magnitude[0]) == pytest.approx(mag, rel=1e-15), name
+        assert float(e[name].phase[0]) == pytest.approx(ph, rel=1e-15), name
