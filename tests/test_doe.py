@@ -15,6 +15,7 @@ from scipy.stats import norm
 import gearte
 from gearte.drives import wang2013
 from gearte.drives.cycloid_pin import CycloidAnalysis, CycloidPin, LostMotion
+from gearte.studies.doe import to_coded, to_natural
 
 
 def quad_matrix(c):
@@ -359,6 +360,47 @@ def test_run_design_vmaps_a_jax_function_and_loops_otherwise():
     np.testing.assert_allclose(a.natural[:, 0], np.repeat([0.0, 1.0, 2.0], 3))
     with pytest.raises(jax.errors.ConcretizationTypeError):
         gearte.run_design(nfn, gearte.FullFactorial(3), vs, 2.0, vectorise=True)
+
+
+@pytest.mark.parametrize("rho", [3, 4])
+def test_run_design_of_three_and_four_variables_maps_every_coordinate(rho):
+    """Every variable's column, coded and natural, and every coordinate of x reaches the model (a design of more than
+    two variables; none of the designs, mappings or the run may stop at two). The points are written out by hand."""
+    lows, highs = [0.0, -1.0, 10.0, 100.0][:rho], [2.0, 1.0, 20.0, 300.0][:rho]
+    vs = [gearte.Variable(f"v{i}", lows[i], highs[i]) for i in range(rho)]
+    weights = 10.0 ** np.arange(rho)  # the response tells every coordinate apart
+    jfn = lambda x, args: jnp.dot(x, jnp.asarray(weights)) + args
+    nfn = lambda x, args: float(np.dot(np.asarray(x), weights)) + args
+    # A two-level full factorial: every corner, the last variable changing fastest; natural = the range's ends.
+    corners = np.array(list(itertools.product(*[(lo, hi) for lo, hi in zip(lows, highs)])))
+    # A rotatable CCD: corners, then each variable at ∓α (α = (2^ρ)^¼) with the others at the centre, then the centre.
+    alpha = (2.0**rho) ** 0.25
+    centre, half = (np.array(lows) + np.array(highs)) / 2, (np.array(highs) - np.array(lows)) / 2
+    axial = [centre + s * alpha * half * np.eye(rho)[i] for i in range(rho) for s in (-1.0, 1.0)]
+    ccd = np.concatenate([corners, np.array(axial), centre[None, :]])
+    # Box-Behnken: each pair of variables at (±1, ±1), the others at the centre, then three centre points.
+    bb = []
+    for i, j in itertools.combinations(range(rho), 2):
+        for si, sj in itertools.product((-1.0, 1.0), repeat=2):
+            bb.append(centre + si * half * np.eye(rho)[i] + sj * half * np.eye(rho)[j])
+    bb = np.concatenate([np.array(bb), np.tile(centre, (3, 1))])
+    for design, natural in ((gearte.FullFactorial(2), corners), (gearte.CentralComposite(), ccd), (gearte.BoxBehnken(), bb)):
+        for fn in (jfn, nfn):
+            run = gearte.run_design(fn, design, vs, 0.5)
+            assert run.vectorised == (fn is jfn)
+            assert run.natural.shape == run.coded.shape == (len(natural), rho), design
+            np.testing.assert_allclose(run.natural, natural, rtol=1e-14, atol=1e-13)
+            np.testing.assert_allclose(run.coded, (natural - centre) / half, rtol=1e-14, atol=1e-14)
+            np.testing.assert_allclose(run.responses, natural @ weights + 0.5, rtol=1e-14)
+    # Space-filling designs: every column in its variable's range, and coded ↔ natural both ways for each.
+    for design in (gearte.LatinHypercube(16, seed=1), gearte.SobolSequence(16, seed=1)):
+        run = gearte.run_design(jfn, design, vs, 0.0)
+        assert run.natural.shape == (16, rho)
+        assert np.all((run.natural >= np.array(lows)) & (run.natural <= np.array(highs)))
+        np.testing.assert_allclose(run.natural, centre + run.coded * half, rtol=1e-14)
+        np.testing.assert_allclose(to_coded(run.natural, vs), run.coded, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(to_natural(run.coded, vs), run.natural, rtol=1e-14)
+        np.testing.assert_allclose(run.responses, run.natural @ weights, rtol=1e-14)
 
 
 @pytest.fixture(scope="module")
