@@ -45,6 +45,7 @@ GROUPS = {
     "test_harmonic_tooth_mesh": "harmonic",
     "test_allocation": "planetary_optimise",
     "test_budget": "planetary_optimise",
+    "test_budget_limits": "planetary_optimise",
     "test_sensitivity": "planetary_optimise",
     "test_identify": "identification",
     "test_identify_grid": "identification",
