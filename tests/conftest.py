@@ -41,6 +41,7 @@ GROUPS = {
     "test_cycloid": "cycloid",
     "test_cycloid_grinding": "cycloid",
     "test_cycloid_floating": "cycloid",
+    "test_cycloid_modification": "cycloid",
     "test_harmonic": "harmonic",
     "test_harmonic_tooth_mesh": "harmonic",
     "test_allocation": "planetary_optimise",
