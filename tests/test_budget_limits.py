@@ -2,6 +2,7 @@
 the calibration on exact metrics cannot meet (the result says infeasible). A file apart from tests/test_budget.py,
 which is near 600 lines; the same scheduling group (tests/conftest.py)."""
 
+import json
 import math
 
 import equinox as eqx
@@ -100,3 +101,66 @@ def test_a_budget_the_optimiser_meets_but_the_calibration_cannot_certify_is_infe
     assert r.label == "optimised" and r.converged
     assert r.result == gearte.RESULTS.infeasible
     assert np.isfinite(r.cost) and r.tolerances["a"] > 0
+    # Asked to throw, it raises rather than hand back a budget that misses the spec.
+    with pytest.raises(RuntimeError, match="fresh samples the optimiser's tolerances, scaled down to 1e-3 of them, still miss"):
+        optimise_budget(p, key=1, n_samples=4000, n_check=2000)
+
+
+STUDY = """
+[study]
+name = "uncertifiable"
+metric = "peak"
+samples = 200
+seed = 1
+unit = "arcsec"
+
+[drive]
+type = "explicit"
+gain_rad_per_um = 1e-5
+
+[[drive.terms]]
+source = "a"
+frequency = 1
+
+[[drive.terms]]
+source = "c"
+frequency = 3
+
+[errors.a]
+tolerance_um = 10
+magnitude = { law = "rayleigh", scale_fraction = 0.5, truncate_at_tolerance = true }
+phase = { rule = "uniform" }
+
+[errors.c]
+tolerance_um = 10
+magnitude = { law = "uniform", low_um = 0, high_um = 10 }
+phase = { rule = "fixed", value_deg = 0 }
+
+[budget]
+spec = SPEC
+sources = ["a"]
+target = 0.99
+samples = 4000
+check_samples = 2000
+compare_random_assembly = false
+"""
+
+
+def test_gearte_run_writes_no_budget_that_misses_the_spec(tmp_path, capsys):
+    """The budget of the test above as a study file: neither the optimised tolerances nor the nominal ones can be
+    scaled to meet the spec (9.95 g = 20.52″) on the fresh samples, so `gearte run` refuses with the reason and writes
+    nothing, instead of a budget at the search's floor that misses the spec. At 12 g the same file gives a budget whose
+    verified yield meets the target."""
+    from gearte import cli
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(STUDY.replace("SPEC", repr(9.95 * GAIN * 206264.80624709636)))
+    capsys.readouterr()
+    assert cli.main(["run", str(cfg), "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "[budget]: The specification cannot be met" in err and "Neither the optimised tolerances nor the nominal ones" in err
+    assert not (tmp_path / "o").exists()
+    cfg.write_text(STUDY.replace("SPEC", repr(12 * GAIN * 206264.80624709636)))
+    assert cli.main(["run", str(cfg), "--out", str(tmp_path / "o"), "--no-progress"]) == 0
+    b = json.loads((tmp_path / "o" / "summary.json").read_text())["budget"]
+    assert b["verified_yield"] >= 0.99 and not b["optimised_direction_misses_the_spec"]

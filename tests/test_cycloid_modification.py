@@ -10,7 +10,7 @@ import pytest
 
 import gearte
 from gearte.drives.cycloid_pin import CycloidAnalysis, CycloidPin, pitch_angles, unit_metrics
-from gearte.optimise.modification import ModificationSpec, modification_summary
+from gearte.optimise.modification import ModificationSpec, modification_report, modification_summary
 
 ARCMIN = 180 * 60 / math.pi  # ′ per rad
 ARCSEC = 180 * 3600 / math.pi  # ″ per rad
@@ -111,8 +111,7 @@ def test_the_rotation_modification_in_the_result_and_its_summary():
     row = s["starts"][0]
     assert row["start"] == pytest.approx(list(start), rel=1e-14) and row["rotation_arcsec"] == pytest.approx(end[2] / R * ARCSEC, rel=1e-12)
     assert s["best"]["wheel_pin_radius_mm"] == pytest.approx(13.5 + end[1], rel=1e-14) and s["result"] == "successful"
-    # Without `rotation` the rows have no rotation (x is (ΔR_Z, Δr_Z)). On a stage without a rotation of its own: with
-    # one and rotation=False, `initial` is currently evaluated with that rotation dropped, which this test does not pin.
+    # Without `rotation` the rows have no rotation (x is (ΔR_Z, Δr_Z)); a stage's own rotation is held (next test).
     plain = eqx.tree_at(lambda d: d.modification.rotation, own, jnp.zeros(()))
     flat = ModificationSpec(
         lost_motion_max_arcmin=20.0, lost_motion_min_arcmin=7.0, radial_clearance_min_mm=0.1, rotation=False, positions_per_pitch=4
@@ -131,3 +130,45 @@ def test_the_rotation_modification_in_the_result_and_its_summary():
     s2 = modification_summary(plain, flat, r2)
     assert all("rotation_arcsec" not in row for row in (s2["best"], s2["initial"], *s2["starts"]))
     assert len(r2.starts[0].end) == 2 and len(r2.initial.end) == 2
+
+
+def test_without_rotation_the_stages_own_rotation_is_held():
+    """`rotation=False` optimises (ΔR_Z, Δr_Z) with the stage's own rotation modification (10″) kept: its `initial` row
+    is the stage as designed (lost motion 6.875′ + 2 × 10″ = 7.21′ to first order, the unit's own metrics exactly), the
+    answer keeps δ = 10″, and the summary and report say it is held. (It had been dropped: `initial` read 6.88′ and a
+    7′ lower bound that the stage meets marked it infeasible.)"""
+    R = 195.0
+    own = CycloidPin(
+        26,
+        pin_circle_radius=R,
+        pin_radius=13.5,
+        eccentricity=6.0,
+        wheel_pin_radius=13.65,
+        rotation_modification=10.0 / ARCSEC,
+        analysis=CycloidAnalysis(budget_mm=50.0),
+    )
+    pos = pitch_angles(own, 4)
+    r = gearte.optimise_modification(
+        own,
+        None,
+        lost_motion_max=20.0 / ARCMIN,
+        lost_motion_min=7.0 / ARCMIN,
+        radial_clearance_min=0.1,
+        positions=pos,
+        starts=[(0.0, 0.15)],
+        max_steps=60,
+        throw=False,
+    )
+    designed = unit_metrics(own, None, positions=pos)
+    assert r.initial.lost_motion_max == pytest.approx(float(designed["lost_motion_max"]), rel=1e-12)
+    assert r.initial.lost_motion_min == pytest.approx(float(designed["lost_motion_min"]), rel=1e-12)
+    assert r.initial.lost_motion_max * ARCMIN == pytest.approx((2 * 0.15 / (6.0 * 25) + 2 * 10.0 / ARCSEC) * ARCMIN, rel=0.01)
+    assert r.initial.feasible  # 7.21′ meets the 7′ lower bound
+    assert float(r.modification.rotation) == pytest.approx(10.0 / ARCSEC, rel=1e-14)
+    assert float(unit_metrics(r.drive, None, positions=pos)["lost_motion_max"]) == pytest.approx(r.lost_motion_max, rel=1e-12)
+    flat = ModificationSpec(
+        lost_motion_max_arcmin=20.0, lost_motion_min_arcmin=7.0, radial_clearance_min_mm=0.1, rotation=False, positions_per_pitch=4
+    )
+    s = modification_summary(own, flat, r)
+    assert s["rotation_held_arcsec"] == pytest.approx(10.0, rel=1e-12)
+    assert "the rotation modification held at the design's 10″" in "\n".join(modification_report(own, s))

@@ -227,7 +227,7 @@ class Budget(AbstractStudyKind):
 
     def run(self, study: Study, spec: BudgetSpec, *, progress: bool | None) -> KindOutcome:
         # The optimiser (optimistix) is imported here: reading and checking the table need none of it.
-        from ..core.solution import is_successful, message
+        from ..core.solution import RESULTS, is_successful, message
         from ..optimise.budget import contributions, optimise_budget, pareto_front, uniform_scaling
 
         b = spec
@@ -247,7 +247,15 @@ class Budget(AbstractStudyKind):
         # The optimiser works on smooth surrogates of the statistics over a few common samples; the calibration
         # on exact metrics can leave its direction costlier than plain uniform scaling. Then report so, and keep
         # the cheaper budget that meets the same checks.
-        beaten = is_successful(base.result) and base.cost < best.cost
+        # An optimised direction that the calibration cannot scale to meet the spec on fresh samples is no answer:
+        # uniform scaling, if it meets the spec, is; if neither does, the spec cannot be met.
+        if bool(best.result == RESULTS.infeasible) and not is_successful(base.result):
+            raise ValueError(
+                f"[budget]: {message(best.result)} Neither the optimised tolerances nor the nominal ones, each scaled down to "
+                f"1e-3 of themselves, meet the spec on {b.check_samples:,} fresh samples"
+            )
+        uncalibrated = bool(best.result == RESULTS.infeasible)
+        beaten = is_successful(base.result) and (base.cost < best.cost or uncalibrated)
         if beaten:
             best = base
         contrib = contributions(p, best.tolerances, key=k_sens, n_samples=min(b.samples, 8192))
@@ -278,6 +286,7 @@ class Budget(AbstractStudyKind):
                 for c, v in zip(b.constraints, best.verified_statistics, strict=True)
             ]
         entry["optimised_direction_beaten_by_uniform_scaling"] = beaten
+        entry["optimised_direction_misses_the_spec"] = uncalibrated
         entry |= {
             "tolerances_um": best.tolerances,
             "nominal_tolerances_um": dict(b.nominal),
@@ -483,7 +492,14 @@ def _report(study: Study, s: dict) -> list[str]:
             "within `maximum_factor` × nominal (a TE that hardly depends on a source, or not at all under this model and "
             "assembly rule). Check that the model holds every effect of such a source before releasing that tolerance.",
         ]
-    if b.get("optimised_direction_beaten_by_uniform_scaling"):
+    if b.get("optimised_direction_misses_the_spec"):
+        lines += [
+            "",
+            "The optimiser's direction, scaled on the fresh samples, could not meet the spec (the smoothed statistics of "
+            "the common samples were too optimistic); the uniform scaling of the nominal tolerances, which does, is "
+            "reported as the budget.",
+        ]
+    elif b.get("optimised_direction_beaten_by_uniform_scaling"):
         lines += [
             "",
             "The optimiser's direction, once calibrated on the exact metrics, cost more than uniform scaling of the "

@@ -391,9 +391,17 @@ def optimise_budget(
     result = RESULTS.promote(sol.result)
     converged = bool(sol.result == optx.RESULTS.successful)
     check(result, throw=throw, what="optimise_budget (BFGS on the smoothed cost)")
-    return _calibrate_and_verify(
+    res = _calibrate_and_verify(
         p, direction, capped, key=k_check, n_check=n_check, label="optimised", result=result, converged=converged, progress=progress
     )
+    if bool(res.result == RESULTS.infeasible):
+        check(
+            res.result,
+            throw=throw,
+            what=f"optimise_budget: on {n_check:,} fresh samples the optimiser's tolerances, scaled down to 1e-3 of them, "
+            "still miss a constraint by more than four standard errors",
+        )
+    return res
 
 
 def _failed(p: BudgetProblem, result) -> BudgetResult:

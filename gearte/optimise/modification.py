@@ -88,8 +88,10 @@ class ModificationSolution(eqx.Module):
 
 
 def _with(drive: CycloidPin, x, rotation: bool) -> CycloidPin:
+    """The drive with shift x[0] and equidistant x[1] (mm), and the rotation x[2]/R_z if it is optimised, else the
+    drive's own."""
     R = drive.pin_circle_radius
-    mod = CycloidModification(x[0], x[1], x[2] / R if rotation else jnp.zeros(()))
+    mod = CycloidModification(x[0], x[1], x[2] / R if rotation else drive.modification.rotation)
     return eqx.tree_at(lambda d: d.modification, drive, mod)
 
 
@@ -167,7 +169,7 @@ def optimise_modification(
     - `lost_motion_min`: required lost motion (backlash), rad (default 0: no interference).
     - `radial_clearance_min`: required radial clearance at root and tip Δr_Z − ΔR_Z, mm.
     - `positions`: input angles, rad (default one input revolution, 2 per pin pitch).
-    - `rotation`: also optimise a rotation modification δ.
+    - `rotation`: also optimise a rotation modification δ (else the drive's own δ is kept).
     - `starts`: starting points (ΔR_Z, Δr_Z[, δ R_z]) in mm (default: spread over the split of
       the lost motion between the modifications).
     - `max_steps`: BFGS steps per penalty weight.
@@ -370,7 +372,8 @@ def modification_summary(drive: CycloidPin, spec: ModificationSpec, sol: Modific
 
     m = sol.modification
     best_end = [float(m.shift), float(m.equidistant)] + ([float(m.rotation) * R] if spec.rotation else [])
-    return {
+    held = {} if spec.rotation else {"rotation_held_arcsec": float(drive.modification.rotation) * ARCSEC_PER_RAD}
+    return held | {
         "constraints": spec.constraints(),
         "best": row(best_end, sol),
         "initial": row(list(sol.initial.end), sol.initial),
@@ -388,7 +391,12 @@ def modification_report(drive: CycloidPin, entry: dict) -> list[str]:
         "",
         f"Maximise the loaded pairs (budget {drive.analysis.budget_mm:g} mm) with the lost motion in "
         f"[{c['lost_motion_min_arcmin']:g}′, {c['lost_motion_max_arcmin']:g}′] and a radial clearance ≥ {c['radial_clearance_min_mm']:g} mm, "
-        f"for the reducer analysed; exact counts over the revolution ({c['positions_per_pitch']} positions per pitch).",
+        f"for the reducer analysed; exact counts over the revolution ({c['positions_per_pitch']} positions per pitch)"
+        + (
+            f"; the rotation modification held at the design's {entry['rotation_held_arcsec']:.4g}″."
+            if entry.get("rotation_held_arcsec")
+            else "."
+        ),
         "",
         "| | R_Z (mm) | r_Z (mm) | loaded pairs mean (min) | lost motion (′) | radial clearance (mm) | feasible |",
         "|---|---|---|---|---|---|---|",
