@@ -164,3 +164,20 @@ def test_gearte_run_writes_no_budget_that_misses_the_spec(tmp_path, capsys):
     assert cli.main(["run", str(cfg), "--out", str(tmp_path / "o"), "--no-progress"]) == 0
     b = json.loads((tmp_path / "o" / "summary.json").read_text())["budget"]
     assert b["verified_yield"] >= 0.99 and not b["optimised_direction_misses_the_spec"]
+
+
+def test_the_exact_scale_of_a_homogeneous_budget_meets_its_spec_whatever_the_rounding():
+    """On a homogeneous problem the calibration scales the tolerances by spec / statistic in one step; the statistic of
+    the scaled tolerances equals the spec only to rounding, and its check must not find it a hair over (that had made
+    a feasible budget 'infeasible' on about half the keys, and hid the uniform scaling from the budget's report)."""
+    p = _problem(
+        [("a", 1, 1.0), ("b", 2, 0.5)],
+        {"a": _rayleigh(), "b": _rayleigh()},
+        costs={"a": gearte.Reciprocal(0.0, 1.0), "b": gearte.Reciprocal(0.0, 1.0)},
+        spec=20.0,
+    )
+    assert p.homogeneous
+    for key in range(12):
+        r = uniform_scaling(p, key=key, n_check=1000)
+        assert result_name(r.result) == "successful", key
+        assert r.verified_statistic <= 20.0 * GAIN * (1 + 0.2)  # the fresh sample's own noise about the spec
