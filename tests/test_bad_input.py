@@ -194,8 +194,8 @@ def test_a_pipe_a_device_or_a_huge_file_as_the_study_file(capsys, tmp_path, monk
         ("tolerance_um = 16", "tolerance_deg = 16", "tolerance_deg: this source is a length; give `tolerance_um`"),
         # an optional key (read only where present) is among the allowed ones, and the nearest
         ("seed = 1001", "seed = 1001\nchunk_sise = 5", "unknown key `chunk_sise` (did you mean `chunk_size`?); allowed here: chunk_size,"),
-        # coprime tooth counts whose hyper-period (89,400 input revolutions) the exact extrema could not sample
-        ("z_sun = 12\nz_planet = 36\nz_ring = 84", "z_sun = 151\nz_planet = 149\nz_ring = 449", "[drive]: Components: freq: over the"),
+        # coprime tooth counts whose hyper-period (358,800 input revolutions) the exact extrema could not sample
+        ("z_sun = 12\nz_planet = 36\nz_ring = 84", "z_sun = 301\nz_planet = 299\nz_ring = 899", "[drive]: Components: freq: over the"),
     ],
     ids=[
         "misspelt source",

@@ -301,34 +301,37 @@ def test_every_random_result_takes_an_explicit_key_or_seed():
 def test_explicit_frequencies_whose_exact_extrema_would_not_fit_are_refused(freqs, shown):
     """The exact extrema sample every period of the fastest term over the hyper-period (16 points each): frequencies
     that make that grid billions of points are refused when the drive is built, not when it runs out of memory."""
-    from gearte.core.signal import MAX_PERIODS
-
-    with pytest.raises(ValueError, match=f"more than {MAX_PERIODS:,}") as e:
+    with pytest.raises(ValueError, match="more than 8,388,608") as e:
         ExplicitDrive([ExplicitTerm("a", freqs[0]), ExplicitTerm("b", freqs[1])], gain=GAIN)
     assert shown in str(e.value)
-    # At the bound itself the drive is built.
-    ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", MAX_PERIODS)], gain=GAIN)
+    # At the bound itself the drive is built: two orders, 262,144 periods, 2 × 16 × 262,144 = 2²³ entries.
+    ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 262_144)], gain=GAIN)
+    with pytest.raises(ValueError, match="makes 262145 periods"):
+        ExplicitDrive([ExplicitTerm("a", 1), ExplicitTerm("b", 262_145)], gain=GAIN)
 
 
 def test_a_hyper_period_whose_exact_extrema_would_not_fit_is_refused_by_every_drive_and_metric():
-    """Coprime tooth counts (151/149/449: the fastest mesh makes 67,799 periods over 89,400 input revolutions) and a
-    signal of 70,000 periods are refused before a grid of a million points per sample is built; 101/103/307 (31,621
-    periods) is computed."""
+    """Coprime tooth counts (301/299/899: the fastest mesh makes 270,599 periods over 358,800 input revolutions; three
+    orders, 13 million table entries) and a signal of 300,000 periods are refused before their tables are built;
+    212/199/610 (64,660 periods, 3.1 million entries) and the harmonic drive's odd 181/183 (four orders up to 66,246:
+    4.2 million) are computed. Two orders reach 2²³ / 32 = 262,144 periods."""
     from fractions import Fraction
 
-    from gearte.core.signal import MAX_PERIODS
+    from gearte.core.signal import MAX_GRID_ENTRIES, grid_entries
 
-    with pytest.raises(ValueError, match="the fastest term makes 67799 periods, more than 65,536"):
-        d = gearte.Planetary2KH(z_sun=151, z_planet=149, z_ring=449, n_planets=3, module=1.0)
+    assert MAX_GRID_ENTRIES == 2**23
+    with pytest.raises(ValueError, match=r"the fastest term makes 270599 periods; with 3 distinct orders .* more than 8,388,608"):
+        d = gearte.Planetary2KH(z_sun=301, z_planet=299, z_ring=899, n_planets=3, module=1.0)
         jax.eval_shape(lambda: d.signal(d.zero_errors()))
-    d = gearte.Planetary2KH(z_sun=101, z_planet=103, z_ring=307, n_planets=3, module=1.0)
-    assert max(jax.eval_shape(lambda: d.signal(d.zero_errors())).orders) == 31621
-    with pytest.raises(ValueError, match="more than 65,536"):
-        gearte.Components(amplitude=[1.0, 1.0], phase=[0.0, 0.0], freq=[1, MAX_PERIODS + 1])
-    gearte.Components(amplitude=[1.0, 1.0], phase=[0.0, 0.0], freq=[1, MAX_PERIODS])
-    long = gearte.TESignal(offset=jnp.zeros(()), cos_coef=jnp.ones(2), sin_coef=jnp.zeros(2), orders=(1, 70_000), fundamental=Fraction(1))
+    d = gearte.Planetary2KH(z_sun=212, z_planet=199, z_ring=610, n_planets=3, module=1.0)
+    orders = jax.eval_shape(lambda: d.signal(d.zero_errors())).orders
+    assert max(orders) == 64660 and grid_entries(orders) == 3 * 16 * 64660
+    with pytest.raises(ValueError, match="more than 8,388,608"):
+        gearte.Components(amplitude=[1.0, 1.0], phase=[0.0, 0.0], freq=[1, 262_145])
+    gearte.Components(amplitude=[1.0, 1.0], phase=[0.0, 0.0], freq=[1, 262_144])
+    long = gearte.TESignal(offset=jnp.zeros(()), cos_coef=jnp.ones(2), sin_coef=jnp.zeros(2), orders=(1, 300_000), fundamental=Fraction(1))
     for fn in (lambda s: extrema(s), lambda s: gearte.smooth_peak(s, width=1e-6)):
-        with pytest.raises(ValueError, match="highest order is 70,000 periods"):
+        with pytest.raises(ValueError, match=r"2 orders up to 300,000 .* need 9,600,000 table entries"):
             fn(long)
 
 

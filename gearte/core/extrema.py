@@ -30,7 +30,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .precision import require_x64
-from .signal import MAX_PERIODS, TESignal, evaluate
+from .signal import MAX_GRID_ENTRIES, TESignal, evaluate, grid_entries
 from .units import TWO_PI as _TWO_PI
 from .validate import as_float, as_int, is_traced
 
@@ -49,13 +49,14 @@ class Extrema(eqx.Module):
 
 
 def _check_orders(signal: TESignal, *, what: str) -> None:
-    """Refuse a signal whose highest order (the fastest term's periods over the hyper-period) exceeds `MAX_PERIODS`:
-    its grid would not fit in memory."""
-    if signal.orders and max(signal.orders) > MAX_PERIODS:
+    """Refuse a signal whose tables would exceed `MAX_GRID_ENTRIES` (its orders × 16 points per period of the
+    highest): they would not fit in memory."""
+    if grid_entries(signal.orders) > MAX_GRID_ENTRIES:
         raise ValueError(
-            f"{what}: the signal's highest order is {max(signal.orders):,} periods of its fastest term over the "
-            f"hyper-period, more than {MAX_PERIODS:,}; a grid of 16 points per period for every sample would not fit in "
-            "memory. Frequencies with small denominators (or tooth counts with common factors) keep the hyper-period short"
+            f"{what}: the signal's {len(signal.orders)} orders up to {max(signal.orders):,} (periods of its fastest term "
+            f"over the hyper-period) need {grid_entries(signal.orders):,} table entries, more than {MAX_GRID_ENTRIES:,}; "
+            "they would not fit in memory. Frequencies with small denominators (or tooth counts with common factors) keep "
+            "the hyper-period short"
         )
 
 
