@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from . import drives as drives
     from . import units as units
+    from .cli.config import Study as Study, build_study as build_study, load_study as load_study
     from .core.extrema import (
         Extrema as Extrema,
         Spectrum as Spectrum,
@@ -241,6 +242,9 @@ _SUBMODULES = frozenset({"cli", "core", "drives", "identification", "optimise", 
 
 #: Each public name → the module it is loaded from (relative to gearte).
 _LAZY: dict[str, str] = {
+    "Study": ".cli.config",
+    "build_study": ".cli.config",
+    "load_study": ".cli.config",
     "Extrema": ".core.extrema",
     "Spectrum": ".core.extrema",
     "extrema": ".core.extrema",

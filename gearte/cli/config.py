@@ -145,7 +145,9 @@ def study_header(st: Table, *, samples: int | None, seed: int | None) -> dict:
 
 
 def load_study(path: str | Path, *, samples: int | None = None, seed: int | None = None) -> Study:
-    """Read and validate a study file; `samples` and `seed` (the command line's) override the file's values."""
+    """Read and validate a study file (docs/study-files.md) into a `Study`: its drive, error model, metric and study
+    kinds, what `gearte run` computes (`gearte.load_study`). `samples` and `seed` (the command line's) override the
+    file's values. A mistake raises a `ConfigError` (a ValueError) naming the file, table and key."""
     path = Path(path)
     raw = read_toml(path)
     try:
@@ -208,7 +210,8 @@ def _check_hyper_period(drive, where: str) -> None:
 
 
 def build_study(raw: dict, source: str, *, samples: int | None = None, seed: int | None = None) -> Study:
-    """A `Study` from parsed TOML (`source` names it in messages and reports)."""
+    """A `Study` from a parsed study file (the dict `tomllib` reads; `source` names it in messages and reports, and
+    file names in `[drive]` are relative to its folder), e.g. a file's tables edited in Python (`gearte.build_study`)."""
     top, st, dt, h = _read_file(raw, samples=samples, seed=seed)
     dt.folder = Path(source).parent  # file names in [drive] are relative to the study file
     # Everything from here on builds JAX objects (the drive, its metrics, the error laws, the study kinds).
