@@ -9,6 +9,7 @@ import json
 import math
 import os
 import pickle
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -215,6 +216,29 @@ def test_study_file_mistakes_named_by_check_and_run(old, new, message, capsys, t
     refused(capsys, tmp_path, "check", cfg, message=message)
     refused(capsys, tmp_path, "run", cfg, "--out", tmp_path / "o", message=message, monkeypatch=monkeypatch)
     with pytest.raises(ConfigError, match=r"s\.toml: "):
+        load_study(cfg)
+
+
+@pytest.mark.parametrize(
+    "example, old, new, message",
+    [
+        ("cycloid_yao2001_unmodified", "positions_per_pitch = 2 ", "positions_per_pitch = 2000000 ", "positions_per_pitch: must be ≤ 4096"),
+        # the grid's revolutions past z_a = 25 repeat pin pairings already on it (as the analysis' revolutions do)
+        ("cycloid_yao2001_unmodified", "revolutions = 1\n\n[drive.reference]", "revolutions = 26\n\n[drive.reference]", "give at most 25, got 26"),
+        ("harmonic_liu", "starts = 32", "starts = 1000000", "starts: must be ≤ 4096"),
+        ("helical_wind_turbine", "carrier_turns = 1 ", "carrier_turns = 1000 ", "carrier_turns: at most 100"),
+        ("helical_wind_turbine", "carrier_turns = 1 ", "carrier_turns = 1\nn_slices = 80000 ", "n_slices: must be ≤ 256"),
+    ],
+)
+def test_counts_that_size_every_sample_are_bounded_when_the_file_is_read(example, old, new, message, tmp_path):
+    """A slip of a few digits in a count that sizes every sample's grid or solve is refused naming the key, before
+    anything is computed (each had been accepted, and the run or its timing would have taken hours or the memory)."""
+    src = ROOT / "examples" / f"{example}.toml"
+    text = src.read_text()
+    assert old in text
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(text.replace(old, new, 1).replace('"dynamics/', f'"{src.parent}/dynamics/'))
+    with pytest.raises(ConfigError, match=re.escape(message)):
         load_study(cfg)
 
 

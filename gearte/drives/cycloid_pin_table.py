@@ -102,8 +102,10 @@ def _analysis(t: Table, z_pins: int) -> dict[str, Any]:
     budget = an.number("deformation_budget_mm", minimum=0)
     width = an.number("smoothing_width_mm", positive=True) if an.has("smoothing_width_mm") else None
     angle = math.radians(an.number("input_angle_deg")) if an.has("input_angle_deg") else None
-    pitch_points = an.integer("pitch_points", 64, minimum=2)
-    sweep_ppp = an.integer("revolution_points_per_pitch", 16, minimum=1)
+    # Counts that size the grids (the cost of every sample grows with them): generous bounds, so that a slip of a few
+    # digits is refused here rather than found after hours.
+    pitch_points = an.integer("pitch_points", 64, minimum=2, maximum=65_536)
+    sweep_ppp = an.integer("revolution_points_per_pitch", 16, minimum=1, maximum=4096)
     revs = an.integer("revolutions", 1, minimum=1)
     if revs > z_pins - 1:
         raise ConfigError(
@@ -113,8 +115,13 @@ def _analysis(t: Table, z_pins: int) -> dict[str, Any]:
     normal = an.boolean("monte_carlo_normal", True)
     an.finish()
     g = _sub(t, "grid")
-    ppp = g.integer("positions_per_pitch", 2, minimum=1)
+    ppp = g.integer("positions_per_pitch", 2, minimum=1, maximum=4096)
     grid_revs = g.integer("revolutions", 1, minimum=1)
+    if grid_revs > z_pins - 1:
+        raise ConfigError(
+            f"{g.where} revolutions: the pairing of pins and tooth spaces repeats after z_a = {z_pins - 1} "
+            f"input revolutions; give at most {z_pins - 1}, got {grid_revs}"
+        )
     g.finish()
     return dict(
         budget_mm=budget,

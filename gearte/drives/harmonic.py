@@ -566,7 +566,7 @@ def _run_settings(t: Table) -> HarmonicRunSettings | None:
         if not isinstance(adj, list) or not all(isinstance(x, str) for x in adj) or not adj:
             raise ConfigError(f'{asm.where} adjustable: expected a list of source names, e.g. ["cs_bore_runout"]')
         adjustable = tuple(adj)
-        starts = asm.integer("starts", 32, minimum=1)
+        starts = asm.integer("starts", 32, minimum=1, maximum=4096)
         asm.finish()
     try:
         settings = HarmonicRunSettings(

@@ -471,7 +471,7 @@ class HelicalPlanetaryDrive(AbstractGridDrive):
         the file's `n_slices` and `stiffness_model`; the dynamic analysis also `settle_mesh_periods` and
         `steps_per_mesh_period` (defaults: the file's ``[model]`` n_periods − 1 and steps_per_period)."""
         from ..core.schema import ConfigError
-        from .helical_table import read_stage_file
+        from .helical_table import MAX_PERIODS, MAX_SLICES, MAX_STEPS_PER_PERIOD, read_stage_file
 
         path = table.path("parameters")
         try:
@@ -480,13 +480,15 @@ class HelicalPlanetaryDrive(AbstractGridDrive):
             raise ConfigError(f"{table.where} parameters: {e}") from None
         kind = table.string("analysis", "quasi_static", choices=tuple(ANALYSES))
         turns = table.number("carrier_turns", 1.0, positive=True)
-        samples = table.integer("samples_per_mesh_period", 16, minimum=2)
-        n_slices = table.integer("n_slices", f.n_slices, minimum=1)
+        if turns > 100:
+            raise ConfigError(f"{table.where} carrier_turns: at most 100 (every sample solves them all), got {turns:g}")
+        samples = table.integer("samples_per_mesh_period", 16, minimum=2, maximum=MAX_STEPS_PER_PERIOD)
+        n_slices = table.integer("n_slices", f.n_slices, minimum=1, maximum=MAX_SLICES)
         by_name = {m.name: m for m in STIFFNESS_MODELS}
         stiffness = table.string("stiffness_model", f.stiffness_model.name, choices=tuple(by_name))
         if kind == "dynamic":
-            settle = table.integer("settle_mesh_periods", f.n_periods - 1, minimum=1)
-            steps = table.integer("steps_per_mesh_period", f.steps_per_period, minimum=4)
+            settle = table.integer("settle_mesh_periods", f.n_periods - 1, minimum=1, maximum=MAX_PERIODS)
+            steps = table.integer("steps_per_mesh_period", f.steps_per_period, minimum=4, maximum=MAX_STEPS_PER_PERIOD)
             analysis: AbstractHelicalAnalysis = Dynamic(
                 turns, samples_per_mesh_period=samples, settle_mesh_periods=settle, steps_per_mesh_period=steps
             )

@@ -53,13 +53,25 @@ def _num(table: Mapping, key: str, where: str) -> float:
     return float(v)
 
 
-def _whole(table: Mapping, key: str, where: str, default: int | None = None, *, minimum: int = 1) -> int:
-    """A whole number ≥ `minimum` from a parameter file (the constructors check the rest); ``default`` when absent."""
+#: Bounds of the counts that size every solve of a parameter or study file (slices across the face, mesh periods,
+#: steps and samples per period): generous, so that a slip of a few digits is refused when the file is read rather
+#: than found after hours.
+MAX_SLICES = 256
+MAX_PERIODS = 10_000
+MAX_STEPS_PER_PERIOD = 16_384
+
+
+def _whole(table: Mapping, key: str, where: str, default: int | None = None, *, minimum: int = 1, maximum: int | None = None) -> int:
+    """A whole number ≥ `minimum` (and ≤ `maximum`) from a parameter file (the constructors check the rest); ``default``
+    when absent."""
     if key not in table and default is not None:
         return default
     if key not in table:
         raise ValueError(f"{where}: missing key {key!r}")
-    return as_int(f"{where}.{key}", table[key], minimum=minimum)
+    v = as_int(f"{where}.{key}", table[key], minimum=minimum)
+    if maximum is not None and v > maximum:
+        raise ValueError(f"{where}.{key}: must be ≤ {maximum:,} (it sizes every solve), got {v:,}")
+    return v
 
 
 def _stiffness_model(model: Mapping, where: str) -> AbstractStiffnessModel:
@@ -149,13 +161,13 @@ def read_stage_file(path: str | Path) -> StageFile:
         raise ValueError(f"{w}: {e}") from None
     return StageFile(
         stage,
-        n_slices=_whole(model, "n_slices", mw, 8),
+        n_slices=_whole(model, "n_slices", mw, 8, maximum=MAX_SLICES),
         stiffness_model=_stiffness_model(model, mw),
         contact_smoothing=_num(model, "contact_smoothing_um", mw) if "contact_smoothing_um" in model else 0.02,
         # the solver's own bounds (`PeriodicSolver`), checked here where the study's analysis takes them as defaults
-        n_periods=_whole(model, "n_periods", mw, 20, minimum=2),
-        steps_per_period=_whole(model, "steps_per_period", mw, 256, minimum=4),
-        samples_per_period=_whole(model, "samples_per_period", mw, 128, minimum=4),
+        n_periods=_whole(model, "n_periods", mw, 20, minimum=2, maximum=MAX_PERIODS),
+        steps_per_period=_whole(model, "steps_per_period", mw, 256, minimum=4, maximum=MAX_STEPS_PER_PERIOD),
+        samples_per_period=_whole(model, "samples_per_period", mw, 128, minimum=4, maximum=MAX_STEPS_PER_PERIOD),
     )
 
 

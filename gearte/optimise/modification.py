@@ -318,7 +318,7 @@ class ModificationSpec(eqx.Module):
             lost_motion_min_arcmin=lo,
             radial_clearance_min_mm=t.number("radial_clearance_min_mm", 0.0, minimum=0),
             rotation=t.boolean("rotation", False),
-            positions_per_pitch=t.integer("positions_per_pitch", 2, minimum=1),
+            positions_per_pitch=t.integer("positions_per_pitch", 2, minimum=1, maximum=4096),
         )
 
     def constraints(self) -> dict:
