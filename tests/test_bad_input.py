@@ -224,7 +224,12 @@ def test_study_file_mistakes_named_by_check_and_run(old, new, message, capsys, t
     [
         ("cycloid_yao2001_unmodified", "positions_per_pitch = 2 ", "positions_per_pitch = 2000000 ", "positions_per_pitch: must be ≤ 4096"),
         # the grid's revolutions past z_a = 25 repeat pin pairings already on it (as the analysis' revolutions do)
-        ("cycloid_yao2001_unmodified", "revolutions = 1\n\n[drive.reference]", "revolutions = 26\n\n[drive.reference]", "give at most 25, got 26"),
+        (
+            "cycloid_yao2001_unmodified",
+            "revolutions = 1\n\n[drive.reference]",
+            "revolutions = 26\n\n[drive.reference]",
+            "give at most 25, got 26",
+        ),
         ("harmonic_liu", "starts = 32", "starts = 1000000", "starts: must be ≤ 4096"),
         ("helical_wind_turbine", "carrier_turns = 1 ", "carrier_turns = 1000 ", "carrier_turns: at most 100"),
         ("helical_wind_turbine", "carrier_turns = 1 ", "carrier_turns = 1\nn_slices = 80000 ", "n_slices: must be ≤ 256"),

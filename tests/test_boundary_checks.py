@@ -275,9 +275,11 @@ def _public_callables():
 def test_every_random_result_takes_an_explicit_key_or_seed():
     # PRNG keys are always explicit: a public function or model that draws anything at random takes its `key` or
     # `seed` keyword-only and without a default (a hidden seed 0 would make every unseeded call the same "random"
-    # draw). Exempt: the key utilities, whose key is their data, and an unscrambled Sobol' sequence, which draws
-    # nothing (its constructor refuses scrambling without a seed: test_doe's bad-input cases).
-    exempt = {"gearte.as_key", "gearte.sample_keys", "gearte.SobolSequence"}
+    # draw). Exempt: the key utilities, whose key is their data, an unscrambled Sobol' sequence, which draws
+    # nothing (its constructor refuses scrambling without a seed: test_doe's bad-input cases), and the study-file
+    # reader, whose `seed` overrides the file's own (a required key of [study], checked below) as --seed does, and
+    # its `Study`, whose seed is its data.
+    exempt = {"gearte.as_key", "gearte.sample_keys", "gearte.SobolSequence", "gearte.load_study", "gearte.build_study", "gearte.Study"}
     checked, wrong = [], []
     for name, sig in _public_callables().items():
         for p in sig.parameters.values():
@@ -288,6 +290,8 @@ def test_every_random_result_takes_an_explicit_key_or_seed():
     assert len(checked) >= 15, checked  # the survey reached the API (identify, monte_carlo, allocate_*, designs, …)
     assert not wrong, wrong
     assert gearte.SobolSequence(16, scramble=False).points(2).shape == (16, 2)
+    with pytest.raises(ValueError, match=r"\[study\]: missing required key `seed`"):
+        gearte.build_study({"study": {"name": "s"}, "drive": {"type": "planetary_2kh"}}, "s.toml")
 
 
 @pytest.mark.parametrize(
