@@ -196,7 +196,11 @@ def test_a_pipe_a_device_or_a_huge_file_as_the_study_file(capsys, tmp_path, monk
         # an optional key (read only where present) is among the allowed ones, and the nearest
         ("seed = 1001", "seed = 1001\nchunk_sise = 5", "unknown key `chunk_sise` (did you mean `chunk_size`?); allowed here: chunk_size,"),
         # coprime tooth counts whose hyper-period (358,800 input revolutions) the exact extrema could not sample
-        ("z_sun = 12\nz_planet = 36\nz_ring = 84", "z_sun = 301\nz_planet = 299\nz_ring = 899", "[drive]: Components: freq: over the"),
+        (
+            "z_sun = 12\nz_planet = 36\nz_ring = 84",
+            "z_sun = 301\nz_planet = 299\nz_ring = 899",
+            "[drive]: extrema: the signal's 3 orders up to 270,599",
+        ),
     ],
     ids=[
         "misspelt source",
@@ -464,6 +468,13 @@ def test_a_study_kinds_samples_are_estimated_with_the_studys_own(capsys, tmp_pat
     doe = ROOT / "examples" / "planetary_wang2013_doe.toml"
     study = load_study(doe, samples=200)
     assert run_mod.kind_evaluations(study) == {"doe": 12 * 4000} and run_mod.evaluations(study) == 48_200
+    # An allocation's worst case is exact (no surrogate samples); its checks take each rule's expected and robust TE
+    # (the found and the given rule) and a Monte Carlo of the other assemblies.
+    alloc = ROOT / "examples" / "planetary_wang2013_allocate.toml"
+    assert run_mod.kind_evaluations(load_study(alloc)) == {"allocation": 2 * (2 * 50_000 + 50_000)}
+    robust = tmp_path / "robust.toml"
+    robust.write_text(alloc.read_text().replace('objective = "worst_case"', 'objective = "robust"'))
+    assert run_mod.kind_evaluations(load_study(robust)) == {"allocation": 16 * 512 + 2 * (2 * 50_000 + 50_000)}
     c = run_mod.estimate_cost(study, measure_above=10_000)
     assert c.rate is not None and c.seconds == pytest.approx(48_200 / c.rate)
     assert run_mod.estimate_cost(study, measure_above=48_200).seconds is None  # not beyond: not timed
@@ -483,7 +494,7 @@ def test_a_study_kinds_samples_are_estimated_with_the_studys_own(capsys, tmp_pat
         tmp_path / "o",
         "--samples",
         200,
-        message="(200 samples of the study's own and at least 48,000 of [doe])",
+        message="(200 samples of the study's own and at least 48,000 of [doe]), and 4.7 KiB of per-sample results held in memory and written to samples.npz; add --yes to run it anyway, or give fewer samples in [doe] (they count most)",
     )
 
 

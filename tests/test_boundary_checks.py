@@ -1,7 +1,9 @@
 """Checks at the public boundary: each refuses an invalid argument with a message naming it, and still accepts a valid one."""
 
 import math
+import tomllib
 import types
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -14,6 +16,8 @@ from gearte.core.twoscale import extrema_two_scale
 from gearte.drives import ExplicitDrive, ExplicitTerm
 from gearte.identification import MeasuredRecord, RecordError, reassemble
 from gearte.identification import assembly as assembly_mod
+
+ROOT = Path(__file__).resolve().parents[1]
 
 GAIN = 1e-5
 
@@ -316,23 +320,41 @@ def test_explicit_frequencies_whose_exact_extrema_would_not_fit_are_refused(freq
 
 def test_a_hyper_period_whose_exact_extrema_would_not_fit_is_refused_by_every_drive_and_metric():
     """Coprime tooth counts (301/299/899: the fastest mesh makes 270,599 periods over 358,800 input revolutions; three
-    orders, 13 million table entries) and a signal of 300,000 periods are refused before their tables are built;
-    212/199/610 (64,660 periods, 3.1 million entries) and the harmonic drive's odd 181/183 (four orders up to 66,246:
-    4.2 million) are computed. Two orders reach 2²³ / 32 = 262,144 periods."""
+    orders, 13 million table entries) and a signal of 300,000 periods are refused before their tables are built, also
+    at 4 times the points per period where 16 would fit; 212/199/610 (64,660 periods, 3.1 million entries) is
+    computed, and so is a harmonic drive whose tooth line is fast (614/616: 12 million entries for the plain grid, but
+    its own two-scale search grids the slow orders only). Two orders reach 2²³ / 32 = 262,144 periods."""
     from fractions import Fraction
 
     from gearte.core.signal import MAX_GRID_ENTRIES, grid_entries
 
     assert MAX_GRID_ENTRIES == 2**23
-    with pytest.raises(ValueError, match=r"the fastest term makes 270599 periods; with 3 distinct orders .* more than 8,388,608"):
-        d = gearte.Planetary2KH(z_sun=301, z_planet=299, z_ring=899, n_planets=3, module=1.0)
-        jax.eval_shape(lambda: d.signal(d.zero_errors()))
+    d = gearte.Planetary2KH(z_sun=301, z_planet=299, z_ring=899, n_planets=3, module=1.0)
+    with pytest.raises(ValueError, match=r"3 orders up to 270,599 .* need 12,988,752 table entries at 16 points per period"):
+        jax.eval_shape(lambda: d.extrema(d.signal(d.zero_errors())))
     d = gearte.Planetary2KH(z_sun=212, z_planet=199, z_ring=610, n_planets=3, module=1.0)
     orders = jax.eval_shape(lambda: d.signal(d.zero_errors())).orders
     assert max(orders) == 64660 and grid_entries(orders) == 3 * 16 * 64660
+    jax.eval_shape(lambda: d.extrema(d.signal(d.zero_errors())))
+    raw = tomllib.loads((ROOT / "examples" / "harmonic_liu.toml").read_text())
+    raw["drive"] |= {"z_flexspline": 614, "z_circular_spline": 616}
+    for table in ("record", "assembly"):
+        raw["drive"].pop(table, None)
+    h = gearte.build_study(raw, str(ROOT / "examples" / "harmonic_614.toml")).drive  # the file's check passes too
+    sig = jax.eval_shape(lambda: h.signal(h.zero_errors()))
+    assert grid_entries(sig.orders) > MAX_GRID_ENTRIES
+    jax.eval_shape(lambda: h.extrema(h.signal(h.zero_errors())))
     with pytest.raises(ValueError, match="more than 8,388,608"):
-        gearte.Components(amplitude=[1.0, 1.0], phase=[0.0, 0.0], freq=[1, 262_145])
-    gearte.Components(amplitude=[1.0, 1.0], phase=[0.0, 0.0], freq=[1, 262_144])
+        jax.eval_shape(lambda: extrema(h.signal(h.zero_errors())))
+    for freq, refused in (([1, 262_145], True), ([1, 262_144], False)):
+        two = gearte.to_signal(gearte.Components(amplitude=[1.0, 1.0], phase=[0.0, 0.0], freq=freq))
+        if refused:
+            with pytest.raises(ValueError, match="more than 8,388,608"):
+                jax.eval_shape(extrema, two)
+        else:
+            jax.eval_shape(extrema, two)
+    with pytest.raises(ValueError, match="more than 8,388,608"):  # 2 orders × 64 × 65,537 points
+        jax.eval_shape(lambda s: extrema(s, oversample=64), gearte.to_signal(gearte.Components([1.0, 1.0], [0.0, 0.0], [1, 65_537])))
     long = gearte.TESignal(offset=jnp.zeros(()), cos_coef=jnp.ones(2), sin_coef=jnp.zeros(2), orders=(1, 300_000), fundamental=Fraction(1))
     for fn in (lambda s: extrema(s), lambda s: gearte.smooth_peak(s, width=1e-6)):
         with pytest.raises(ValueError, match=r"2 orders up to 300,000 .* need 9,600,000 table entries"):

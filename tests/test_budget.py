@@ -297,6 +297,7 @@ def test_budget_example_through_gearte_run(tmp_path):
     # Every budget reported says whether it meets its spec on its fresh samples (these do: a verified yield ≥ target).
     assert all(r["meets_spec"] == (r["verified_yield"] >= 0.9973) for r in b["pareto"])
     assert b["random_assembly"]["meets_spec"] and b["random_assembly"]["baseline_meets_spec"]
+    assert b["baseline_meets_spec"] and all(r["baseline_meets_spec"] for r in b["pareto"])
     assert "| meets the spec |" in (out / "report.md").read_text()
     # The further Monte Carlo at the optimised tolerances (the study's seed, 3000 samples): its P99.73 is NumPy's
     # linear-interpolation quantile of the per-sample values the run wrote (same values, same rule: to rounding),

@@ -172,3 +172,19 @@ def test_without_rotation_the_stages_own_rotation_is_held():
     s = modification_summary(own, flat, r)
     assert s["rotation_held_arcsec"] == pytest.approx(10.0, rel=1e-12)
     assert "the rotation modification held at the design's 10″" in "\n".join(modification_report(own, s))
+    # The default starts aim the shift and equidistant at the middle of the spec less the held rotation's 2δ (first
+    # order: 2(Δr_Z − ΔR_Z·0.6)/(a z_a) + 2δ = 13.5′), not past it by 2δ.
+    r2 = gearte.optimise_modification(
+        own,
+        None,
+        lost_motion_max=20.0 / ARCMIN,
+        lost_motion_min=7.0 / ARCMIN,
+        radial_clearance_min=0.1,
+        positions=pos,
+        max_steps=1,
+        throw=False,
+    )
+    assert len(r2.starts) == 6  # the design, then five splits between shift and equidistant
+    for st in r2.starts[1:]:
+        dR, dr = st.start
+        assert (2 * (dr - dR * 0.6) / (6.0 * 25) + 2 * 10.0 / ARCSEC) * ARCMIN == pytest.approx(13.5, rel=1e-9)

@@ -76,13 +76,22 @@ def test_example_writes_the_experiment_the_surface_and_the_plots(example_run):
     # The stationary point of this surface lies far outside the box (negative eccentricities), and the report says
     # so; moved to the centre of the ranges, it is reported without that warning.
     stationary = d["canonical"]["stationary_point"]
-    assert stationary["E_s"] < 0 and "E_s = " in report and "outside the variables' ranges (|coded| up to" in report
+    assert stationary["E_s"] < 0 and "E_s = " in report and "outside the runs (|coded| up to" in report
     from gearte.cli.doe_kind import doe_report
 
     inside = copy.deepcopy(d)
     inside["canonical"]["stationary_point"] = {v["name"]: (v["low"] + v["high"]) / 2 for v in d["variables"]}
     text = "\n".join(doe_report(inside))
-    assert "stationary point E_s = " in text and "outside the variables' ranges" not in text
+    assert "stationary point E_s = " in text and "outside the runs" not in text
+    # Nor where it lies among a circumscribed design's axial runs (|coded| ≤ α = √2), only beyond them.
+    axial = copy.deepcopy(d)
+    v0 = d["variables"][0]
+    half = (v0["high"] - v0["low"]) / 2
+    for c, said in ((1.4, False), (1.5, True)):
+        axial["canonical"]["stationary_point"] = {v["name"]: (v["low"] + v["high"]) / 2 for v in d["variables"]}
+        axial["canonical"]["stationary_point"][v0["name"]] = (v0["low"] + v0["high"]) / 2 + c * half
+        text = "\n".join(doe_report(axial))
+        assert ("outside the runs (|coded| up to 1.5, the design's runs reaching 1.41)" in text) == said, c
 
 
 def test_a_run_is_the_percentile_of_an_independent_monte_carlo(example_run):

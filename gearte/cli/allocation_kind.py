@@ -109,10 +109,12 @@ class Allocation(AbstractStudyKind):
             )
 
     def evaluations(self, study: Study, spec: AllocationSpec) -> int:
-        # every start's surrogate once, the check of the found (and the given) rule, and the Monte Carlo of each other
-        # assembly shown beside the study's own (random, and the given rule)
+        # every start's surrogate once (the worst case has none: it is exact), the check of the found (and the given)
+        # rule (its expected and robust TE), and the Monte Carlo of each other assembly shown beside the study's own
+        # (random, and the given rule)
         rules = 1 + (spec.seed_rule is not None)
-        return spec.starts * spec.surrogate_samples + rules * (spec.check_samples + study.samples)
+        surrogate = 0 if spec.objective == "worst_case" else spec.starts * spec.surrogate_samples
+        return surrogate + rules * (2 * spec.check_samples + study.samples)
 
     def run(self, study: Study, spec: AllocationSpec, *, progress: bool | None) -> KindOutcome:
         # The optimiser (optimistix) is imported here: reading and checking the table need none of it.

@@ -196,15 +196,16 @@ def check_file(path: str | Path, *, samples: int | None = None, seed: int | None
 
 
 def _check_hyper_period(drive, where: str) -> None:
-    """A sinusoidal drive's terms (traced, not computed) must make a hyper-period whose exact extrema fit in memory
-    (`gearte.core.signal.check_periods`): refused here, naming the table, rather than when the study compiles."""
+    """A sinusoidal drive's exact extrema (traced, not computed: the drive's own search, e.g. the harmonic drive's
+    two-scale one) must fit in memory (`gearte.core.extrema`'s bound on their tables): refused here, naming the table,
+    rather than when the study compiles."""
     import jax
 
     from ..drives.protocol import AbstractSinusoidalDrive
 
     if isinstance(drive, AbstractSinusoidalDrive):
         try:
-            jax.eval_shape(lambda: drive.components(drive.zero_errors()))
+            jax.eval_shape(lambda: drive.extrema(drive.signal(drive.zero_errors())))
         except ValueError as e:
             raise ConfigError(f"{where}: {e}") from None
 

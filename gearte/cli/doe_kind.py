@@ -450,10 +450,11 @@ def doe_report(d: dict) -> list[str]:
             + f" ({_fmt(ca['stationary_value'])}{sym})"
         )
         coded = max(abs(2 * (x - var[n]["low"]) / (var[n]["high"] - var[n]["low"]) - 1) for n, x in ca["stationary_point"].items())
-        if coded > 1:
+        reach = max(1.0, float(np.max(np.abs(np.asarray(d["design"]["coded"])))))  # a circumscribed design's axial runs
+        if coded > reach * (1 + 1e-9):
             stationary += (
-                f", outside the variables' ranges (|coded| up to {coded:.3g}, the ranges being ±1): the fitted surface "
-                "extrapolated past the runs, not a design point"
+                f", outside the runs (|coded| up to {coded:.3g}, the design's runs reaching {reach:.3g}): the fitted "
+                "surface extrapolated, not a design point"
             )
     lines += [f"Canonical analysis: eigenvalues of the quadratic part {eig} (coded units): a {ca['nature']}{stationary}.", ""]
     where = (

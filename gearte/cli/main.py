@@ -159,7 +159,12 @@ def _confirm(args, study: Study) -> None:
     )
     if cost.seconds > _lazy("CONFIRM_SECONDS") or cost.bytes > _lazy("CONFIRM_BYTES"):
         if not args.yes:
-            raise OutputError(f"{where}: {what}; add --yes to run it anyway, or give fewer samples")
+            fewer = (
+                "give fewer samples"
+                if sum(kinds.values()) <= study.samples
+                else f"give fewer samples in {', '.join(f'[{t}]' for t in kinds)} (they count most)"
+            )
+            raise OutputError(f"{where}: {what}; add --yes to run it anyway, or {fewer}")
     print(f"gearte: {where}: {what}", file=sys.stderr)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .precision import require_x64
-from .signal import MAX_GRID_ENTRIES, TESignal, evaluate, grid_entries
+from .signal import MAX_GRID_ENTRIES, TESignal, evaluate
 from .units import TWO_PI as _TWO_PI
 from .validate import as_float, as_int, is_traced
 
@@ -48,15 +48,16 @@ class Extrema(eqx.Module):
     theta_min: Float[Array, "*batch"]
 
 
-def _check_orders(signal: TESignal, *, what: str) -> None:
-    """Refuse a signal whose tables would exceed `MAX_GRID_ENTRIES` (its orders × 16 points per period of the
-    highest): they would not fit in memory."""
-    if grid_entries(signal.orders) > MAX_GRID_ENTRIES:
+def _check_orders(signal: TESignal, oversample: int, *, what: str) -> None:
+    """Refuse a signal whose tables (its orders × `grid_size` points) would exceed `MAX_GRID_ENTRIES`: they would not
+    fit in memory."""
+    entries = len(signal.orders) * grid_size(signal.orders, oversample) if signal.orders else 0
+    if entries > MAX_GRID_ENTRIES:
         raise ValueError(
             f"{what}: the signal's {len(signal.orders)} orders up to {max(signal.orders):,} (periods of its fastest term "
-            f"over the hyper-period) need {grid_entries(signal.orders):,} table entries, more than {MAX_GRID_ENTRIES:,}; "
-            "they would not fit in memory. Frequencies with small denominators (or tooth counts with common factors) keep "
-            "the hyper-period short"
+            f"over the hyper-period) need {entries:,} table entries at {oversample} points per period, more than "
+            f"{MAX_GRID_ENTRIES:,}; they would not fit in memory. Frequencies with small denominators (or tooth counts with "
+            "common factors) keep the hyper-period short"
         )
 
 
@@ -381,7 +382,7 @@ def extrema(signal: TESignal, *, oversample: int = 16, candidates: int = 2, newt
     oversample = as_int("extrema: oversample", oversample, minimum=8)  # the candidate ranking needs 8 points per period
     candidates = as_int("extrema: candidates", candidates, minimum=1)
     newton_steps = as_int("extrema: newton_steps", newton_steps, minimum=0)
-    _check_orders(signal, what="extrema")
+    _check_orders(signal, oversample, what="extrema")
     f0 = float(signal.fundamental)
     if not signal.orders:
         zero = jnp.zeros_like(signal.offset)
@@ -456,7 +457,7 @@ def smooth_peak(signal: TESignal, *, width: float | Float[Array, ""], oversample
         as_float("smooth_peak: width", width, positive=True, hint="rad")
     oversample = as_int("smooth_peak: oversample", oversample, minimum=2)
     require_x64()
-    _check_orders(signal, what="smooth_peak")
+    _check_orders(signal, oversample, what="smooth_peak")
     if not signal.orders:
         return width * jnp.logaddexp(signal.offset / width, -signal.offset / width)
     m = grid_size(signal.orders, oversample)

@@ -133,7 +133,6 @@ class Components(eqx.Module):
         labels: Sequence[str] | None = None,
     ):
         self.freq = tuple(as_frequency(f, name=f"freq[{i}]") for i, f in enumerate(freq))
-        check_periods(self.freq, what="Components: freq")
         n = len(self.freq)
         self.amplitude = jnp.asarray(amplitude, dtype=float)
         self.phase = jnp.asarray(phase, dtype=float)

@@ -228,7 +228,10 @@ def optimise_modification(
     )
     if starts is None:
         target = lm_hi if lm_lo == 0 else 0.5 * (lm_lo + lm_hi)
-        start_list = [x_init, *_default_starts(drive, 0.9 * target if lm_lo == 0 else target, c_lo, rotation)]
+        # A rotation held (not optimised) adds its 2δ to the lost motion the shift and equidistant must leave.
+        held = 0.0 if rotation else 2.0 * float(drive.modification.rotation)
+        aim = max((0.9 * target if lm_lo == 0 else target) - held, 0.0)
+        start_list = [x_init, *_default_starts(drive, aim, c_lo, rotation)]
     else:
         start_list = [np.asarray(s, dtype=float) for s in starts]
         for s in start_list:
