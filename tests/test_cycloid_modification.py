@@ -62,37 +62,47 @@ def test_the_lower_bound_on_the_lost_motion_lifts_a_start_below_it():
     assert r.initial.radial_clearance == pytest.approx(0.15, rel=1e-12) and not r.initial.feasible
 
 
-def test_the_rotation_modification_in_the_result_and_its_summary():
-    """With `rotation`, x = (ΔR_Z, Δr_Z, δ·R_z) in mm: the result's modification turns each flank by δ = x₂ / R_z (rad),
-    its lost motion carries the first-order 2δ on top of 2 Δr_Z / (a z_a), and the summary gives δ in ″ for the
-    optimum, the drive's own modification (10″ here) and every start."""
-    R = 195.0
-    own = CycloidPin(
+def _optimise(drive, pos, **options):
+    """`optimise_modification` of an error-free `drive` at `pos` for a lost motion in [7′, 20′] and a radial clearance
+    ≥ 0.1 mm, the result returned whether or not feasible."""
+    return gearte.optimise_modification(
+        drive,
+        None,
+        lost_motion_max=20.0 / ARCMIN,
+        lost_motion_min=7.0 / ARCMIN,
+        radial_clearance_min=0.1,
+        positions=pos,
+        throw=False,
+        **options,
+    )
+
+
+def _stage_with_its_own_rotation():
+    """26 pins on R_z = 195 mm, a = 6 mm (K₁ = 0.8), wheel pins 0.15 mm larger (the equidistant), a 10″ rotation
+    modification of its own, and a 50 mm deformation budget (every driving pin counts as loaded)."""
+    return CycloidPin(
         26,
-        pin_circle_radius=R,
+        pin_circle_radius=195.0,
         pin_radius=13.5,
         eccentricity=6.0,
         wheel_pin_radius=13.65,
         rotation_modification=10.0 / ARCSEC,
         analysis=CycloidAnalysis(budget_mm=50.0),
     )
+
+
+def test_the_rotation_modification_in_the_result_and_its_summary():
+    """With `rotation`, x = (ΔR_Z, Δr_Z, δ·R_z) in mm: the result's modification turns each flank by δ = x₂ / R_z (rad),
+    its lost motion carries the first-order 2δ on top of 2 Δr_Z / (a z_a), and the summary gives δ in ″ for the
+    optimum, the drive's own modification (10″ here) and every start."""
+    R = 195.0
+    own = _stage_with_its_own_rotation()
     pos = pitch_angles(own, 4)
     start = (0.0, 0.15, 20.0 / ARCSEC * R)  # δ = 20″
     spec = ModificationSpec(
         lost_motion_max_arcmin=20.0, lost_motion_min_arcmin=7.0, radial_clearance_min_mm=0.1, rotation=True, positions_per_pitch=4
     )
-    r = gearte.optimise_modification(
-        own,
-        None,
-        lost_motion_max=20.0 / ARCMIN,
-        lost_motion_min=7.0 / ARCMIN,
-        radial_clearance_min=0.1,
-        positions=pos,
-        rotation=True,
-        starts=[start],
-        max_steps=60,
-        throw=False,
-    )
+    r = _optimise(own, pos, rotation=True, starts=[start], max_steps=60)
     assert r.feasible and len(r.starts) == 1
     end = r.starts[0].end
     assert len(end) == 3 and float(r.modification.rotation) == pytest.approx(end[2] / R, rel=1e-14)
@@ -116,17 +126,7 @@ def test_the_rotation_modification_in_the_result_and_its_summary():
     flat = ModificationSpec(
         lost_motion_max_arcmin=20.0, lost_motion_min_arcmin=7.0, radial_clearance_min_mm=0.1, rotation=False, positions_per_pitch=4
     )
-    r2 = gearte.optimise_modification(
-        plain,
-        None,
-        lost_motion_max=20.0 / ARCMIN,
-        lost_motion_min=7.0 / ARCMIN,
-        radial_clearance_min=0.1,
-        positions=pos,
-        starts=[start[:2]],
-        max_steps=60,
-        throw=False,
-    )
+    r2 = _optimise(plain, pos, starts=[start[:2]], max_steps=60)
     s2 = modification_summary(plain, flat, r2)
     assert all("rotation_arcsec" not in row for row in (s2["best"], s2["initial"], *s2["starts"]))
     assert len(r2.starts[0].end) == 2 and len(r2.initial.end) == 2
@@ -137,28 +137,9 @@ def test_without_rotation_the_stages_own_rotation_is_held():
     is the stage as designed (lost motion 6.875′ + 2 × 10″ = 7.21′ to first order, the unit's own metrics exactly), the
     answer keeps δ = 10″, and the summary and report say it is held. (It had been dropped: `initial` read 6.88′ and a
     7′ lower bound that the stage meets marked it infeasible.)"""
-    R = 195.0
-    own = CycloidPin(
-        26,
-        pin_circle_radius=R,
-        pin_radius=13.5,
-        eccentricity=6.0,
-        wheel_pin_radius=13.65,
-        rotation_modification=10.0 / ARCSEC,
-        analysis=CycloidAnalysis(budget_mm=50.0),
-    )
+    own = _stage_with_its_own_rotation()
     pos = pitch_angles(own, 4)
-    r = gearte.optimise_modification(
-        own,
-        None,
-        lost_motion_max=20.0 / ARCMIN,
-        lost_motion_min=7.0 / ARCMIN,
-        radial_clearance_min=0.1,
-        positions=pos,
-        starts=[(0.0, 0.15)],
-        max_steps=60,
-        throw=False,
-    )
+    r = _optimise(own, pos, starts=[(0.0, 0.15)], max_steps=60)
     designed = unit_metrics(own, None, positions=pos)
     assert r.initial.lost_motion_max == pytest.approx(float(designed["lost_motion_max"]), rel=1e-12)
     assert r.initial.lost_motion_min == pytest.approx(float(designed["lost_motion_min"]), rel=1e-12)
@@ -174,16 +155,7 @@ def test_without_rotation_the_stages_own_rotation_is_held():
     assert "the rotation modification held at the design's 10″" in "\n".join(modification_report(own, s))
     # The default starts aim the shift and equidistant at the middle of the spec less the held rotation's 2δ (first
     # order: 2(Δr_Z − ΔR_Z·0.6)/(a z_a) + 2δ = 13.5′), not past it by 2δ.
-    r2 = gearte.optimise_modification(
-        own,
-        None,
-        lost_motion_max=20.0 / ARCMIN,
-        lost_motion_min=7.0 / ARCMIN,
-        radial_clearance_min=0.1,
-        positions=pos,
-        max_steps=1,
-        throw=False,
-    )
+    r2 = _optimise(own, pos, max_steps=1)
     assert len(r2.starts) == 6  # the design, then five splits between shift and equidistant
     for st in r2.starts[1:]:
         dR, dr = st.start
