@@ -221,9 +221,8 @@ class Budget(AbstractStudyKind):
         # one pass of the optimiser, the optimum's and the uniform scaling's checks, the contributions; the same again
         # for random assembly where it is compared; each Pareto point on half the samples
         one = spec.samples + 2 * spec.check_samples + min(spec.samples, 8192)
-        has_rule = any(isinstance(s.phase, (RelativePhase, FixedPhase)) for s in study.errors.sources.values())
         front = max(1000, spec.check_samples // 2)
-        return one * (1 + (spec.compare_random_assembly and has_rule)) + len(spec.pareto_specs) * (max(256, spec.samples // 2) + 2 * front)
+        return one * (1 + _compares_random_assembly(study, spec)) + len(spec.pareto_specs) * (max(256, spec.samples // 2) + 2 * front)
 
     def run(self, study: Study, spec: BudgetSpec, *, progress: bool | None) -> KindOutcome:
         # The optimiser (optimistix) is imported here: reading and checking the table need none of it.
@@ -249,12 +248,12 @@ class Budget(AbstractStudyKind):
         # the cheaper budget that meets the same checks.
         # An optimised direction that the calibration cannot scale to meet the spec on fresh samples is no answer:
         # uniform scaling, if it meets the spec, is; if neither does, the spec cannot be met.
-        if bool(best.result == RESULTS.infeasible) and not is_successful(base.result):
+        uncalibrated = bool(best.result == RESULTS.infeasible)
+        if uncalibrated and not is_successful(base.result):
             raise ValueError(
                 f"[budget]: {message(best.result)} Neither the optimised tolerances nor the nominal ones, each scaled down to "
                 f"1e-3 of themselves, meet the spec on {b.check_samples:,} fresh samples"
             )
-        uncalibrated = bool(best.result == RESULTS.infeasible)
         beaten = is_successful(base.result) and (base.cost < best.cost or uncalibrated)
         optimiser = best  # what the optimiser itself reports, whichever budget is kept
         if beaten:
@@ -321,8 +320,7 @@ class Budget(AbstractStudyKind):
                 },
             )
         ]
-        has_rule = any(isinstance(s.phase, (RelativePhase, FixedPhase)) for s in study.errors.sources.values())
-        if b.compare_random_assembly and has_rule:
+        if _compares_random_assembly(study, b):
             rand_model = ErrorModel(
                 {n: ErrorSource(s.magnitude, UniformPhase() if s.phase is not None else None) for n, s in study.errors.sources.items()},
                 study.errors.specs,
@@ -443,6 +441,11 @@ def _constraint_rows(study: Study, b: dict) -> list[str]:
             got, met = f"{v:.4g}{unit}", (v >= c["spec"]) if higher else (v <= c["spec"])
         rows.append(f"| {what} | {'≥' if higher else '≤'} {c['spec']:g}{unit} | {got} | {'yes' if met else '**no**'} |")
     return [*rows, ""]
+
+
+def _compares_random_assembly(study: Study, b: BudgetSpec) -> bool:
+    """Whether the budget is also computed with every phase random: asked for, and some phase follows a rule."""
+    return b.compare_random_assembly and any(isinstance(s.phase, (RelativePhase, FixedPhase)) for s in study.errors.sources.values())
 
 
 def _meets(optimised: bool, uniform: bool) -> str:

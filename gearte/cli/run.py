@@ -204,7 +204,8 @@ def estimate_cost(study: Study, *, measure_above: int | None = None) -> Cost:
     per = 3 * 8 + sum(int(np.prod(x.shape)) * x.dtype.itemsize for x in jax.tree.leaves(shapes[1]))  # te, te_rad, index
     nbytes = 0 if _streams(study) else per * study.samples
     kinds = kind_evaluations(study)
-    if study.samples + sum(kinds.values()) <= (timing_threshold(study) if measure_above is None else measure_above):
+    total = study.samples + sum(kinds.values())
+    if total <= (timing_threshold(study) if measure_above is None else measure_above):
         return Cost(study.samples, nbytes, kind_samples=kinds)
     # The smallest compiled call (two blocks), run twice: the second is timed.
     n = measured_samples(study)
@@ -212,7 +213,7 @@ def estimate_cost(study: Study, *, measure_above: int | None = None) -> Cost:
     t0 = time.perf_counter()
     monte_carlo(fn, key=study.seed, n_samples=n, chunk_size=n, progress=False)
     rate = n / max(time.perf_counter() - t0, 1e-9)
-    return Cost(study.samples, nbytes, (study.samples + sum(kinds.values())) / rate, rate, kinds)
+    return Cost(study.samples, nbytes, total / rate, rate, kinds)
 
 
 def run_study(

@@ -21,6 +21,7 @@ For objectives that an optimiser should see as smooth, use `smooth_peak`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from fractions import Fraction
 
 import equinox as eqx
@@ -30,7 +31,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .precision import require_x64
-from .signal import MAX_GRID_ENTRIES, TESignal, evaluate
+from .signal import TESignal, evaluate, gcd_fractions
 from .units import TWO_PI as _TWO_PI
 from .validate import as_float, as_int, is_traced
 
@@ -48,10 +49,28 @@ class Extrema(eqx.Module):
     theta_min: Float[Array, "*batch"]
 
 
+def grid_size(orders: tuple[int, ...], oversample: int) -> int:
+    # A whole number of blocks of half a period of the highest order (see `_argmax_tau`).
+    block = max(1, oversample // 2)
+    m = max(64, oversample * max(orders))
+    return block * -(-m // block)
+
+
+#: Most entries of the exact extrema's tables for one signal: distinct orders × grid points (`grid_size`). The tables
+#: of cos kτ and sin kτ are constants of the compiled search: 2²³ entries keep them within about 200 MB (seconds to
+#: compile; near the bound with many orders, minutes), where a longer hyper-period or more orders would exhaust the
+#: memory. At 16 points per period two orders reach 262,144 periods; the planetary and harmonic drives have 3-4 orders.
+MAX_GRID_ENTRIES = 2**23
+
+
+def grid_entries(orders: tuple[int, ...], oversample: int = 16) -> int:
+    """Entries of the exact extrema's tables for a signal of these orders (`MAX_GRID_ENTRIES`)."""
+    return len(orders) * grid_size(orders, oversample) if orders else 0
+
+
 def _check_orders(signal: TESignal, oversample: int, *, what: str) -> None:
-    """Refuse a signal whose tables (its orders × `grid_size` points) would exceed `MAX_GRID_ENTRIES`: they would not
-    fit in memory."""
-    entries = len(signal.orders) * grid_size(signal.orders, oversample) if signal.orders else 0
+    """Refuse a signal whose tables would exceed `MAX_GRID_ENTRIES`: they would not fit in memory."""
+    entries = grid_entries(signal.orders, oversample)
     if entries > MAX_GRID_ENTRIES:
         raise ValueError(
             f"{what}: the signal's {len(signal.orders)} orders up to {max(signal.orders):,} (periods of its fastest term "
@@ -61,11 +80,28 @@ def _check_orders(signal: TESignal, oversample: int, *, what: str) -> None:
         )
 
 
-def grid_size(orders: tuple[int, ...], oversample: int) -> int:
-    # A whole number of blocks of half a period of the highest order (see `_argmax_tau`).
-    block = max(1, oversample // 2)
-    m = max(64, oversample * max(orders))
-    return block * -(-m // block)
+def _short(x) -> str:
+    return str(x) if len(str(x)) <= 16 else f"{float(x):.6g}"
+
+
+def check_frequencies(freqs: Sequence[Fraction], *, what: str) -> None:
+    """Raise a ValueError naming `what` where the frequencies `freqs` (multiples of the input speed) make a signal
+    whose exact extrema would need more than `MAX_GRID_ENTRIES` table entries (`grid_entries`), before any signal is
+    built (for a drive given as explicit terms)."""
+    nonzero = sorted({abs(f) for f in freqs if f != 0})
+    if not nonzero:
+        return
+    f0 = gcd_fractions(nonzero)
+    periods = nonzero[-1] / f0
+    if grid_entries(tuple(int(f / f0) for f in nonzero)) > MAX_GRID_ENTRIES:
+        raise ValueError(
+            f"{what}: over the hyper-period of these frequencies ({', '.join(_short(f) for f in nonzero)}: {_short(1 / f0)} "
+            f"input revolutions) the fastest term makes {_short(periods)} periods; with {len(nonzero)} distinct orders the "
+            f"exact extrema's grid (16 points per period, one table row per order) would need "
+            f"{_short(len(nonzero) * 16 * periods)} entries, more than {MAX_GRID_ENTRIES:,}. The count grows with the "
+            "frequencies' ratio and their denominators (for a gear train, with large coprime tooth counts): give "
+            "frequencies as fractions with small denominators, e.g. '7/24', or tooth counts with common factors"
+        )
 
 
 def _basis(orders: tuple[int, ...], m: int, *, wrap: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -58,7 +58,7 @@ def as_frequency(value: FrequencyLike, *, name: str = "frequency") -> Fraction:
     raise ValueError(f"{name}: expected a number or a fraction string like '7/24', got {type(value).__name__}")
 
 
-def _gcd_fractions(values: Sequence[Fraction]) -> Fraction:
+def gcd_fractions(values: Sequence[Fraction]) -> Fraction:
     num = 0
     den = 1
     for v in values:
@@ -67,43 +67,6 @@ def _gcd_fractions(values: Sequence[Fraction]) -> Fraction:
         g = math.gcd(num, den)
         num, den = num // g, den // g
     return Fraction(num, den)
-
-
-#: Most entries of the exact extrema's tables for one signal: distinct orders × grid points, the grid holding 16
-#: points per period of the fastest term over the hyper-period (`gearte.extrema`). The tables of cos kτ and sin kτ are
-#: constants of the compiled search: 2²³ entries keep them within about 200 MB (seconds to compile; near the bound
-#: with many orders, minutes), where a longer hyper-period or more orders would exhaust the memory. Two orders may
-#: reach 262,144 periods; the planetary and harmonic drives have 3-4 orders.
-MAX_GRID_ENTRIES = 2**23
-
-
-def _short(x) -> str:
-    return str(x) if len(str(x)) <= 16 else f"{float(x):.6g}"
-
-
-def grid_entries(orders: Sequence[int]) -> int:
-    """Entries of the exact extrema's tables for a signal of these orders (`MAX_GRID_ENTRIES`)."""
-    return len(orders) * max(64, 16 * max(orders)) if orders else 0
-
-
-def check_periods(freqs: Sequence[Fraction], *, what: str) -> None:
-    """Raise a ValueError naming `what` where the frequencies `freqs` (multiples of the input speed) make a signal
-    whose exact extrema would need more than `MAX_GRID_ENTRIES` table entries (its distinct orders × 16 points per
-    period of the fastest term over the hyper-period)."""
-    nonzero = sorted({abs(f) for f in freqs if f != 0})
-    if not nonzero:
-        return
-    f0 = _gcd_fractions(nonzero)
-    periods = nonzero[-1] / f0
-    if grid_entries([int(f / f0) for f in nonzero]) > MAX_GRID_ENTRIES:
-        raise ValueError(
-            f"{what}: over the hyper-period of these frequencies ({', '.join(_short(f) for f in nonzero)}: {_short(1 / f0)} "
-            f"input revolutions) the fastest term makes {_short(periods)} periods; with {len(nonzero)} distinct orders the "
-            f"exact extrema's grid (16 points per period, one table row per order) would need "
-            f"{_short(len(nonzero) * 16 * periods)} entries, more than {MAX_GRID_ENTRIES:,}. The count grows with the "
-            "frequencies' ratio and their denominators (for a gear train, with large coprime tooth counts): give "
-            "frequencies as fractions with small denominators, e.g. '7/24', or tooth counts with common factors"
-        )
 
 
 class Components(eqx.Module):
@@ -190,7 +153,7 @@ def to_signal(components: Components) -> TESignal:
     require_x64()
     freqs = components.freq
     nonzero = sorted({abs(f) for f in freqs if f != 0})
-    f0 = _gcd_fractions(nonzero) if nonzero else Fraction(1)
+    f0 = gcd_fractions(nonzero) if nonzero else Fraction(1)
     orders = tuple(int(f / f0) for f in nonzero)
     index = {f: j for j, f in enumerate(nonzero)}
     amp = components.amplitude * components.gain

@@ -97,6 +97,17 @@ def drive_arguments(t: Table) -> dict[str, Any]:
     return kw
 
 
+def _revolutions(t: Table, z_pins: int) -> int:
+    """A table's input `revolutions` (default 1): at most z_a = z_pins − 1, after which pins and tooth spaces pair again."""
+    revs = t.integer("revolutions", 1, minimum=1)
+    if revs > z_pins - 1:
+        raise ConfigError(
+            f"{t.where} revolutions: the pairing of pins and tooth spaces repeats after z_a = {z_pins - 1} "
+            f"input revolutions; give at most {z_pins - 1}, got {revs}"
+        )
+    return revs
+
+
 def _analysis(t: Table, z_pins: int) -> dict[str, Any]:
     an = t.table("analysis")
     budget = an.number("deformation_budget_mm", minimum=0)
@@ -106,22 +117,12 @@ def _analysis(t: Table, z_pins: int) -> dict[str, Any]:
     # digits is refused here rather than found after hours.
     pitch_points = an.integer("pitch_points", 64, minimum=2, maximum=65_536)
     sweep_ppp = an.integer("revolution_points_per_pitch", 16, minimum=1, maximum=4096)
-    revs = an.integer("revolutions", 1, minimum=1)
-    if revs > z_pins - 1:
-        raise ConfigError(
-            f"{an.where} revolutions: the pairing of pins and tooth spaces repeats after z_a = {z_pins - 1} "
-            f"input revolutions; give at most {z_pins - 1}, got {revs}"
-        )
+    revs = _revolutions(an, z_pins)
     normal = an.boolean("monte_carlo_normal", True)
     an.finish()
     g = _sub(t, "grid")
     ppp = g.integer("positions_per_pitch", 2, minimum=1, maximum=4096)
-    grid_revs = g.integer("revolutions", 1, minimum=1)
-    if grid_revs > z_pins - 1:
-        raise ConfigError(
-            f"{g.where} revolutions: the pairing of pins and tooth spaces repeats after z_a = {z_pins - 1} "
-            f"input revolutions; give at most {z_pins - 1}, got {grid_revs}"
-        )
+    grid_revs = _revolutions(g, z_pins)
     g.finish()
     return dict(
         budget_mm=budget,

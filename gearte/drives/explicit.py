@@ -15,8 +15,9 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ..core.extrema import check_frequencies
 from ..core.schema import ConfigError, Table
-from ..core.signal import Components, FrequencyLike, as_frequency, check_periods
+from ..core.signal import Components, FrequencyLike, as_frequency
 from ..core.units import ARCSEC_PER_RAD
 from .protocol import AbstractSinusoidalDrive, Eccentricity, SourceSpec
 
@@ -68,7 +69,7 @@ class ExplicitDrive(AbstractSinusoidalDrive):
         if not math.isfinite(float(gain)) or float(gain) == 0.0:
             raise ValueError(f"ExplicitDrive.gain: must be finite and non-zero (rad/µm), got {gain!r}")
         self.terms = tuple(terms)
-        check_periods([t.frequency for t in self.terms], what="terms")
+        check_frequencies([t.frequency for t in self.terms], what="terms")
         self.gain = jnp.asarray(float(gain))
         self.name = name
 
