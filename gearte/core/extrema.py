@@ -224,6 +224,9 @@ def _cis_small(t: Array, terms: int = 10) -> tuple[Array, Array]:
 #: its window: a block the first round reopens holds a flat peak.
 MULTI_START_NEWTON_STEPS = 4
 
+#: Blocks of a row refined in each later round of `_locate_extrema` (the first round refines `candidates`).
+LATER_CANDIDATES = 16
+
 
 def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_steps: int) -> tuple[Array, Array]:
     """τ of the maximum and of the minimum of the signal over [0, 2π), certified.
@@ -242,7 +245,9 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     3. **Certificate.** The true maximum lies within h/2 of a grid point and has f′ = 0, so it
        exceeds that block's grid maximum by at most h²/8 · max|f″| ≤ h²/8 · Σ k²|c_k| (+ the
        float32 bound). Rounds continue until no unrefined block can hold a better extremum; one
-       round settles almost every signal, near-ties take more. A block refined in the first round from its best
+       round settles almost every signal, near-ties take more. The later rounds take only the rows still
+       uncertified, 32 at a time, and `LATER_CANDIDATES` blocks of each: a signal with a fast order of large
+       amplitude (large coprime tooth counts) has tens of humps within the margin of its maximum. A block refined in the first round from its best
        point whose float64 window has another local maximum, at least two points away, that could hold more (a
        flat peak with two humps) is refined again in a later round from every local maximum of its window, with
        at least `MULTI_START_NEWTON_STEPS` Newton steps.
@@ -284,12 +289,14 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     ks = np.outer(np.arange(block + 2) * h, k)
     cos_w, sin_w = jnp.asarray(np.cos(ks)), jnp.asarray(np.sin(ks))  # (block + 2, K)
 
-    def refine(rem, top_r, a_r, b_r, off_r, multi: bool):
+    def refine(rem, top_r, a_r, b_r, off_r, multi: bool, c: int):
         """Refine the `c` best unrefined blocks of the rows given: (blocks taken, τ, value, the blocks, and each
         block's best value away from the hump refined) per row. `multi`: Newton's method from every point of the
         block that is a local maximum of its float64 window (a block may hold two humps of a flat peak), else from
         the block's best point alone."""
-        sel = _top_indices(jnp.where(rem, top_r, -jnp.inf), c)  # (r, c) blocks
+        score = jnp.where(rem, top_r, -jnp.inf)
+        # (r, c) blocks: by repeated argmax in the first round (c small: cheap on the CPU), by XLA's top-k after it.
+        sel = jax.lax.top_k(score, c)[1].astype(int) if multi else _top_indices(score, c)
         p0 = (sel * block - 1) % m  # the window starts one point before the block
         cp, sp = cos_pt[p0], sin_pt[p0]  # (r, c, K)
         # f(τ_{p0} + t) = c₀ + Σ A_k cos kt + B_k sin kt  (coefficients about the window's first point).
@@ -357,40 +364,47 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         return taken, tau_new, v_new, sel, rest
 
     # Round one: every row, each block from its best point.
-    taken, tau, val, sel, rest = refine(jnp.ones((rows, nb), dtype=bool), top, a2, b2, off2, multi=False)
+    taken, tau, val, sel, rest = refine(jnp.ones((rows, nb), dtype=bool), top, a2, b2, off2, multi=False, c=c)
     # A refined block whose second hump could still hold more (a flat peak) stays open, ranked by that hump, for the
     # later rounds, which refine from every local maximum of a block with more Newton steps. Kept per row and
     # candidate, not scattered into the (rows × blocks) arrays: the blocks reopened are merged into them only for
     # the rows a later round takes.
     reopen = rest + margin[:, None] > val[:, None]
 
-    def uncertified(state):
-        remaining, _, best_val, reopen = state
-        blocks = jnp.max(jnp.where(remaining, top, -jnp.inf), axis=-1).astype(best_val.dtype)
-        again = jnp.max(jnp.where(reopen, rest, -jnp.inf), axis=-1)
-        return jnp.maximum(blocks, again) + margin > best_val
+    def bound_of(remaining, top_r):
+        return jnp.max(jnp.where(remaining, top_r, -jnp.inf), axis=-1).astype(val.dtype)
 
-    state = (~taken, tau, val, reopen)
+    # Each row's bound (the best an unrefined block or a reopened hump could hold, less the margin), computed once
+    # for every row and then only for the rows a later round takes: a round costs those rows, not the batch.
+    bound = jnp.maximum(bound_of(~taken, top), jnp.max(jnp.where(reopen, rest, -jnp.inf), axis=-1))
+    state = (~taken, tau, val, reopen, bound)
 
-    # Later rounds (near-ties and flat peaks: a few rows in ten thousand): only the rows still uncertified, `few` at
-    # a time, gathered, refined and scattered back, so a rare row does not cost a round of the batch.
+    # Later rounds (near-ties and flat peaks): only the rows still uncertified, `few` at a time, gathered, refined
+    # and scattered back, so a rare row does not cost a round of the batch; each takes `LATER_CANDIDATES` blocks of a
+    # row (a signal with a fast order of large amplitude has many near-tied humps: tens of blocks to refine).
     few = min(rows, 32)
+    c_later = min(LATER_CANDIDATES, nb)
+
+    def uncertified(st):
+        return st[4] + margin > st[2]
 
     def later_round(st):
-        remaining, best_tau, best_val, reopen = st
+        remaining, best_tau, best_val, reopen, bound = st
         pick = jnp.nonzero(uncertified(st), size=few, fill_value=rows)[0]  # rows (index `rows` = none)
         safe = jnp.minimum(pick, rows - 1)
         # The picked rows' reopened blocks join their unrefined ones, ranked by their second hump (or their value).
         sub = jnp.arange(few)[:, None]
         rem_p = remaining[safe].at[sub, sel[safe]].max(reopen[safe])
         top_p = top[safe].at[sub, sel[safe]].set(jnp.where(reopen[safe], rest[safe].astype(top.dtype), top[safe][sub, sel[safe]]))
-        taken, t_new, v_new, _, _ = refine(rem_p, top_p, a2[safe], b2[safe], off2[safe], multi=True)
+        taken, t_new, v_new, _, _ = refine(rem_p, top_p, a2[safe], b2[safe], off2[safe], multi=True, c=c_later)
         better = v_new > best_val[safe]
-        remaining = remaining.at[pick].set(rem_p & ~taken, mode="drop")
+        rem_p = rem_p & ~taken
+        remaining = remaining.at[pick].set(rem_p, mode="drop")
         reopen = reopen.at[pick].set(False, mode="drop")
+        bound = bound.at[pick].set(bound_of(rem_p, top_p), mode="drop")
         best_tau = best_tau.at[pick].set(jnp.where(better, t_new, best_tau[safe]), mode="drop")
         best_val = best_val.at[pick].set(jnp.where(better, v_new, best_val[safe]), mode="drop")
-        return remaining, best_tau, best_val, reopen
+        return remaining, best_tau, best_val, reopen, bound
 
     state = jax.lax.while_loop(lambda st: jnp.any(uncertified(st)), later_round, state)
     tau = state[1]
