@@ -69,13 +69,13 @@ def _dense_extrema(c0, a, b, orders):
     return out[0], out[1], out[0] - out[1]
 
 
-@pytest.mark.parametrize("later", [None, 1], ids=["default", "one-block-per-round"])
+@pytest.mark.parametrize("later", [None, 1], ids=["default", "fewest-blocks-per-round"])
 def test_many_near_tied_humps_of_coprime_tooth_counts(later, monkeypatch):
     # A planetary of coprime tooth counts (31/23/77) makes orders 713, 1771 and 2387 of comparable amplitude: tens of
     # humps per signal lie within the first round's certificate margin of the maximum, so every row takes later
-    # rounds (several per batch: 32 rows each). With one block per later round a row takes tens of rounds, and the
-    # blocks ranked first by the float32 grid miss the extremum in about a fifth of these signals (by up to 0.3 % of
-    # the span): the certificate must find it. Every extremum beats a dense grid, the ones checked equal SciPy's,
+    # rounds (several per batch: 32 rows each). With the fewest blocks per later round (4 of these 4,968) a row takes
+    # several rounds, and the blocks ranked first by the float32 grid miss the extremum in about a fifth of these
+    # signals (by up to 0.3 % of the span): the certificate must find it. Every extremum beats a dense grid, the ones checked equal SciPy's,
     # and a signal's extrema in the batch are its own alone.
     if later is not None:
         monkeypatch.setattr(ex, "LATER_CANDIDATES", later)

@@ -57,9 +57,10 @@ def grid_size(orders: tuple[int, ...], oversample: int) -> int:
 
 
 #: Most entries of the exact extrema's tables for one signal: distinct orders × grid points (`grid_size`). The tables
-#: of cos kτ and sin kτ are constants of the compiled search: 2²³ entries keep them within about 200 MB (seconds to
-#: compile; near the bound with many orders, minutes), where a longer hyper-period or more orders would exhaust the
-#: memory. At 16 points per period two orders reach 262,144 periods; the planetary and harmonic drives have 3-4 orders.
+#: of cos kτ and sin kτ are constants of the compiled search: 2²³ entries keep them within about 200 MB (at the bound,
+#: 5-7 s to compile and 2 GB of peak memory with 16-32 orders), where a longer hyper-period or more orders would
+#: exhaust the memory. At 16 points per period two orders reach 262,144 periods; the planetary and harmonic drives
+#: have 3-4 orders.
 MAX_GRID_ENTRIES = 2**23
 
 
@@ -224,8 +225,18 @@ def _cis_small(t: Array, terms: int = 10) -> tuple[Array, Array]:
 #: its window: a block the first round reopens holds a flat peak.
 MULTI_START_NEWTON_STEPS = 4
 
-#: Blocks of a row refined in each later round of `_locate_extrema` (the first round refines `candidates`).
+#: Blocks of a row refined in each later round of `_locate_extrema` (the first round refines `candidates`), or one in
+#: 1,024 of its blocks where that is more (a round's selection costs all of a row's blocks).
 LATER_CANDIDATES = 16
+
+
+def _tables(orders: tuple[int, ...], m: int) -> tuple[Array, Array]:
+    """cos kτᵢ, sin kτᵢ on τᵢ = 2πi/m, i = 0…m−1, shape (K, m), constants of the compiled search. The angle is
+    reduced exactly, k i mod m, before it is scaled: the tables are correctly rounded whatever k i (computed in the
+    search, XLA would fuse the sines into the grid's sum, once per sample: four times slower)."""
+    phase = (np.asarray(orders, dtype=np.int64)[:, None] * np.arange(m, dtype=np.int64)) % m
+    kt = phase.astype(np.float64) * (_TWO_PI / m)
+    return jnp.asarray(np.cos(kt)), jnp.asarray(np.sin(kt))
 
 
 def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_steps: int) -> tuple[Array, Array]:
@@ -259,8 +270,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     nb = m // block
     h = _TWO_PI / m
     k = np.asarray(orders, dtype=np.float64)
-    kt = np.outer(k, _TWO_PI * np.arange(m) / m)
-    cos_tab, sin_tab = np.cos(kt), np.sin(kt)  # (K, m)
+    cos_tab, sin_tab = _tables(orders, m)  # (K, m)
     batch = signal.offset.shape
     a = signal.cos_coef.reshape(-1, n_orders)
     b = signal.sin_coef.reshape(-1, n_orders)
@@ -272,7 +282,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     f32 = jnp.float32
     g = off[:, None].astype(f32)
     for j in range(n_orders):
-        g = g + a[:, j, None].astype(f32) * cos_tab[j].astype(np.float32) + b[:, j, None].astype(f32) * sin_tab[j].astype(np.float32)
+        g = g + a[:, j, None].astype(f32) * cos_tab[j].astype(f32) + b[:, j, None].astype(f32) * sin_tab[j].astype(f32)
     g = g.reshape(n, nb, block)
     top = jnp.concatenate([jnp.max(g, axis=-1), -jnp.min(g, axis=-1)])  # (2B, nb), float32: ranks blocks
 
@@ -284,7 +294,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     rounding = (2 * n_orders + 4) * 1.01 * u32 * (jnp.abs(off2) + jnp.sum(jnp.abs(a2) + jnp.abs(b2), axis=-1))
     margin = h * h / 8.0 * jnp.sum(k * k * jnp.sqrt(a2**2 + b2**2), axis=-1) + rounding
     c = min(candidates, nb)
-    cos_pt, sin_pt = jnp.asarray(cos_tab.T), jnp.asarray(sin_tab.T)  # (m, K): cos kτᵢ, sin kτᵢ
+    cos_pt, sin_pt = cos_tab.T, sin_tab.T  # (m, K): cos kτᵢ, sin kτᵢ
     # cos kτ_s, sin kτ_s at the offsets s h, s = 0 … block + 1, of a block's window from its first point.
     ks = np.outer(np.arange(block + 2) * h, k)
     cos_w, sin_w = jnp.asarray(np.cos(ks)), jnp.asarray(np.sin(ks))  # (block + 2, K)
@@ -330,11 +340,12 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         denom = fm - 2.0 * fc + fp
         curved = denom < 0.0
         t = h * (1.0 + first.astype(w.dtype) + jnp.where(curved, jnp.clip(0.5 * d1 / jnp.where(curved, denom, -1.0), -0.5, 0.5), 0.0))
-        best_t, best_v = t, None
         # A block refined again holds a flat peak (two humps), where Newton's method converges slowly: more steps
         # (these rounds are rare: a few rows in ten thousand).
         steps = max(newton_steps, MULTI_START_NEWTON_STEPS) if multi else newton_steps
-        for step_no in range(steps + 1):
+
+        def newton(t, best_t, best_v, last: bool):
+            """Evaluate at t, keep the best point visited (the first of equals), and take a Newton step."""
             c1, s1 = _cis_small(t)
             ck, sk = _cis_powers(c1, s1, orders)  # (r, c, K), or (r, c, block, K) from every start
             fv, f1, f2 = expand(off_r[:, None]), 0.0, 0.0
@@ -343,17 +354,28 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
                 fv = fv + even
                 f1 = f1 + kq * (expand(big_b[q]) * ck[..., q] - expand(big_a[q]) * sk[..., q])
                 f2 = f2 - kq * kq * even
-            # The best point visited so far (the first of equals): no stacking of the steps, which XLA
-            # would fuse by recomputing every step once per output.
             if best_v is None:
                 best_v = fv if start is None else jnp.where(start, fv, -jnp.inf)
             else:
                 better = fv > best_v if start is None else start & (fv > best_v)
                 best_t, best_v = jnp.where(better, t, best_t), jnp.where(better, fv, best_v)
-            if step_no == steps:
-                break
-            concave = f2 < 0.0
-            t = t + jnp.clip(jnp.where(concave, -f1 / jnp.where(concave, f2, 1.0), 0.0), -h, h)
+            if not last:
+                concave = f2 < 0.0
+                t = t + jnp.clip(jnp.where(concave, -f1 / jnp.where(concave, f2, 1.0), 0.0), -h, h)
+            return t, best_t, best_v
+
+        if multi:
+            # A loop, not unrolled: XLA would fuse every step into one kernel of thousands of operations, which LLVM
+            # took minutes to compile for many orders (16 orders of up to 16,384 periods: over ten minutes; 2 s now).
+            best_v = jnp.full(t.shape, -jnp.inf, dtype=t.dtype)
+            t, best_t, best_v = jax.lax.fori_loop(0, steps, lambda _, tv: newton(*tv, last=False), (t, t, best_v))
+            _, best_t, best_v = newton(t, best_t, best_v, last=True)
+        else:
+            # Unrolled (one or two steps): the steps fuse into one kernel, and no stacking of the steps, which XLA
+            # would fuse by recomputing every step once per output.
+            best_t, best_v = t, None
+            for step_no in range(steps + 1):
+                t, best_t, best_v = newton(t, best_t, best_v, last=step_no == steps)
         assert best_v is not None
         at = expand(p0.astype(w.dtype)) * h
         flat_v, flat_t = best_v.reshape(best_v.shape[0], -1), (best_t + at).reshape(best_v.shape[0], -1)
@@ -383,7 +405,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     # and scattered back, so a rare row does not cost a round of the batch; each takes `LATER_CANDIDATES` blocks of a
     # row (a signal with a fast order of large amplitude has many near-tied humps: tens of blocks to refine).
     few = min(rows, 32)
-    c_later = min(LATER_CANDIDATES, nb)
+    c_later = min(max(LATER_CANDIDATES, nb // 1024), nb)
 
     def uncertified(st):
         return st[4] + margin > st[2]
