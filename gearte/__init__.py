@@ -231,7 +231,9 @@ if TYPE_CHECKING:
     )
     from .studies.sensitivity import SobolIndices as SobolIndices, sobol_indices as sobol_indices
     from .studies.sensitivity_pathwise import (
+        GradientRow as GradientRow,
         PathwiseSensitivity as PathwiseSensitivity,
+        gradient_rows as gradient_rows,
         pathwise_sensitivities as pathwise_sensitivities,
     )
 
@@ -437,6 +439,8 @@ _LAZY: dict[str, str] = {
     "sobol_indices": ".studies.sensitivity",
     "PathwiseSensitivity": ".studies.sensitivity_pathwise",
     "pathwise_sensitivities": ".studies.sensitivity_pathwise",
+    "GradientRow": ".studies.sensitivity_pathwise",
+    "gradient_rows": ".studies.sensitivity_pathwise",
 }
 
 #: The public names: every lazily loaded name, the public submodules and the version.
