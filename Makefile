@@ -40,6 +40,7 @@ test: lint
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_planetary_mc.py
 	$(BIN)/python benchmarks/bench_scaleout.py
+	$(BIN)/python benchmarks/bench_extrema.py
 	$(BIN)/python benchmarks/bench_grid_drives.py
 	$(BIN)/python benchmarks/bench_helical.py
 	$(BIN)/python benchmarks/bench_rv.py
