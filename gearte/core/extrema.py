@@ -5,16 +5,16 @@ grid of ``oversample`` points per period of its highest order; the blocks (half 
 period) with the best grid maxima are re-evaluated in float64 and refined by safeguarded Newton
 steps on the trigonometric polynomial itself, round after round until a rigorous bound (grid
 spacing, curvature and float32 rounding) shows that no unrefined block can hold a better
-extremum (see `_locate_extrema`); a refined block whose window shows a second hump that could hold more (a flat
-peak) is refined again from every local maximum of its window.
+extremum (see `_locate_extrema`); a refined block whose window shows a second hump that could hold more, or whose
+best point a Newton step would still raise (a flat peak), is refined again from every point of its window.
 
-**Known limitation.** A very flat peak (f″ near zero at its top) can be missed by more than 1e-6: on a
-constructed family of such peaks (orders 1 and 3, β just below −1/9 in cos u + β cos 3u plus a small tilt: the top
-splits into two humps closer than a grid step, and the grid's maximum lies between them, where f″ > 0 and no Newton
-step is taken) 41 of 400 were off by more than 1e-6 of the span, 1.7e-5 at worst, with the default
-`newton_steps = 1`, and 16 with 3 (tests/test_extrema_humps.py, a strict expected failure). Random signals like
-the examples' are within 1e-6 in the tests (tests/test_metrics.py) and 3e-11 at worst on 400 random signals of
-orders up to 40. The
+A very flat top (f″ near zero), or two humps closer than a grid step (the grid's maximum between them, where
+f″ > 0 and Newton's method takes no step), leaves a Newton step from the best point a gain to make: such a block is
+refined again from every point of its window (`FLAT_GAIN`). On constructed families of such peaks (orders 1 and 3,
+and 1, 64 and 192, with β near −1/9 in cos u + β cos 3u plus a small tilt) 41 of 400 and 16 of 240 had been off by
+more than 1e-6 of the span (up to 5.8e-5), whatever `newton_steps`; none of 2,080 now (4e-7 at worst;
+tests/test_extrema_humps.py). Random signals like the examples' are within 1e-6 in the tests
+(tests/test_metrics.py) and 3e-11 at worst on 400 random signals of orders up to 40. The
 search runs on stopped gradients; the value is then re-evaluated at the located
 angle, so by the envelope theorem its gradient is exact and finite, also at
 zero amplitude and at ties (where it is a valid subgradient).
@@ -224,9 +224,13 @@ def _cis_small(t: Array, terms: int = 10) -> tuple[Array, Array]:
     return c, t * s
 
 
-#: Newton steps (at least) of the later rounds of `_locate_extrema`, which refine a block from every local maximum of
-#: its window: a block the first round reopens holds a flat peak.
+#: Newton steps (at least) of the later rounds of `_locate_extrema`, which refine a block from every point of its
+#: window: a block the first round reopens holds a flat peak.
 MULTI_START_NEWTON_STEPS = 4
+
+#: A block refined in the first round is refined again from every point of its window where a Newton step from its
+#: best point would still gain more than this, relative to the signal's scale Σ |a_k| + |b_k| (a flat top).
+FLAT_GAIN = 1e-8
 
 #: Blocks of a row refined in each later round of `_locate_extrema` (the first round refines `candidates`), or one in
 #: 1,024 of its blocks where that is more (a round's selection costs all of a row's blocks).
@@ -261,10 +265,12 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
        float32 bound). Rounds continue until no unrefined block can hold a better extremum; one
        round settles almost every signal, near-ties take more. The later rounds take only the rows still
        uncertified, 32 at a time, and `LATER_CANDIDATES` blocks of each: a signal with a fast order of large
-       amplitude (large coprime tooth counts) has tens of humps within the margin of its maximum. A block refined in the first round from its best
-       point whose float64 window has another local maximum, at least two points away, that could hold more (a
-       flat peak with two humps) is refined again in a later round from every local maximum of its window, with
-       at least `MULTI_START_NEWTON_STEPS` Newton steps.
+       amplitude (large coprime tooth counts) has tens of humps within the margin of its maximum. A block
+       refined in the first round from its best point whose float64 window has another local maximum, at least
+       two points away, that could hold more (a flat peak with two humps), or whose best point a Newton step would
+       still raise by more than `FLAT_GAIN` of the signal's scale (a flat top, two humps closer than a grid step),
+       is refined again in a later round from every point of its window, with at least
+       `MULTI_START_NEWTON_STEPS` Newton steps.
     """
     orders = signal.orders
     n_orders = len(orders)
@@ -304,9 +310,9 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
 
     def refine(rem, top_r, a_r, b_r, off_r, multi: bool, c: int):
         """Refine the `c` best unrefined blocks of the rows given: (blocks taken, τ, value, the blocks, and each
-        block's best value away from the hump refined) per row. `multi`: Newton's method from every point of the
-        block that is a local maximum of its float64 window (a block may hold two humps of a flat peak), else from
-        the block's best point alone."""
+        block's best value away from the hump refined, or its own where a Newton step would still raise it) per row.
+        `multi`: Newton's method from every point of the block (a block may hold two humps of a flat peak), else
+        from the block's best point alone."""
         score = jnp.where(rem, top_r, -jnp.inf)
         # (r, c) blocks: by repeated argmax in the first round (c small: cheap on the CPU), by XLA's top-k after it.
         sel = jax.lax.top_k(score, c)[1].astype(int) if multi else _top_indices(score, c)
@@ -329,7 +335,9 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         rest = jnp.max(jnp.where(hump, inner, -jnp.inf), axis=-1)
         if multi:
             fm, fc, fp = w[..., :-2], inner, w[..., 2:]  # (r, c, block): every point of the block
-            start = ((fc >= fm) & (fc >= fp)) | (points == j[..., None])
+            # Every point of the block a start (their values are computed anyway): two humps closer than a grid step
+            # show one grid maximum between them, and the points beyond them lead to each.
+            start = jnp.ones(fc.shape, dtype=bool)
             expand = lambda x: x[..., None]  # (r, c) → (r, c, 1)
             first = points
         else:
@@ -347,8 +355,9 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         # (these rounds are rare: a few rows in ten thousand).
         steps = max(newton_steps, MULTI_START_NEWTON_STEPS) if multi else newton_steps
 
-        def newton(t, best_t, best_v, last: bool):
-            """Evaluate at t, keep the best point visited (the first of equals), and take a Newton step."""
+        def newton(t, best_t, best_v, best_g, last: bool):
+            """Evaluate at t, keep the best point visited (the first of equals) and the gain a Newton step from it
+            would predict (infinite where the signal is not concave there), and take a Newton step."""
             c1, s1 = _cis_small(t)
             ck, sk = _cis_powers(c1, s1, orders)  # (r, c, K), or (r, c, block, K) from every start
             fv, f1, f2 = expand(off_r[:, None]), 0.0, 0.0
@@ -357,41 +366,60 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
                 fv = fv + even
                 f1 = f1 + kq * (expand(big_b[q]) * ck[..., q] - expand(big_a[q]) * sk[..., q])
                 f2 = f2 - kq * kq * even
+            concave = f2 < 0.0
+            step = jnp.clip(jnp.where(concave, -f1 / jnp.where(concave, f2, 1.0), 0.0), -h, h)
+            # The gain of the (safeguarded) step by the quadratic model, counted where its end lies in the block (to
+            # half a grid step beyond its end points): a hump beyond it is another block's, which the certificate
+            # bounds.
+            inside = (t + step >= 0.5 * h) & (t + step <= (block + 0.5) * h)
+            gain = jnp.where(concave, f1 * step + 0.5 * f2 * step * step, jnp.where(f1 == 0.0, 0.0, jnp.inf))
+            gain = jnp.where(inside, gain, 0.0)
             if best_v is None:
-                best_v = fv if start is None else jnp.where(start, fv, -jnp.inf)
+                best_v, best_g = (fv, gain) if start is None else (jnp.where(start, fv, -jnp.inf), gain)
             else:
                 better = fv > best_v if start is None else start & (fv > best_v)
-                best_t, best_v = jnp.where(better, t, best_t), jnp.where(better, fv, best_v)
+                best_t, best_v, best_g = jnp.where(better, t, best_t), jnp.where(better, fv, best_v), jnp.where(better, gain, best_g)
             if not last:
-                concave = f2 < 0.0
-                t = t + jnp.clip(jnp.where(concave, -f1 / jnp.where(concave, f2, 1.0), 0.0), -h, h)
-            return t, best_t, best_v
+                t = t + step
+            return t, best_t, best_v, best_g
 
         if multi:
             # A loop, not unrolled: XLA would fuse every step into one kernel of thousands of operations, which LLVM
             # took minutes to compile for many orders (16 orders of up to 16,384 periods: over ten minutes; 2 s now).
             best_v = jnp.full(t.shape, -jnp.inf, dtype=t.dtype)
-            t, best_t, best_v = jax.lax.fori_loop(0, steps, lambda _, tv: newton(*tv, last=False), (t, t, best_v))
-            _, best_t, best_v = newton(t, best_t, best_v, last=True)
+            t, best_t, best_v, best_g = jax.lax.fori_loop(0, steps, lambda _, tv: newton(*tv, last=False), (t, t, best_v, best_v))
+            _, best_t, best_v, best_g = newton(t, best_t, best_v, best_g, last=True)
         else:
             # Unrolled (one or two steps): the steps fuse into one kernel, and no stacking of the steps, which XLA
             # would fuse by recomputing every step once per output.
-            best_t, best_v = t, None
+            best_t, best_v, best_g = t, None, None
             for step_no in range(steps + 1):
-                t, best_t, best_v = newton(t, best_t, best_v, last=step_no == steps)
-        assert best_v is not None
+                t, best_t, best_v, best_g = newton(t, best_t, best_v, best_g, last=step_no == steps)
+        assert best_v is not None and best_g is not None
         at = expand(p0.astype(w.dtype)) * h
         flat_v, flat_t = best_v.reshape(best_v.shape[0], -1), (best_t + at).reshape(best_v.shape[0], -1)
         best = _argmax(flat_v)[:, None]  # the best candidate (the first of equals)
         tau_new = jnp.take_along_axis(flat_t, best, axis=-1)[:, 0]
         v_new = jnp.take_along_axis(flat_v, best, axis=-1)[:, 0]
-        taken = jnp.any(jnp.arange(nb) == sel[..., None], axis=-2)
+        if multi:  # a scatter: the comparison below would hold (rows, c, blocks) booleans, gigabytes for large c
+            taken = jnp.zeros(rem.shape, dtype=bool).at[jnp.arange(rem.shape[0])[:, None], sel].set(True)
+        else:
+            taken = jnp.any(jnp.arange(nb) == sel[..., None], axis=-2)
+            # A block whose best point a Newton step would still raise (a flat top: f″ near zero, or two humps closer
+            # than a grid step with the best point in the dip between them) is reopened like a second hump, ranked
+            # by its own value.
+            scale = jnp.sum(jnp.abs(a_r) + jnp.abs(b_r), axis=-1)  # the offset changes no shape
+            unsettled = best_g > FLAT_GAIN * scale[:, None]
+            # Reopened where the gain a step predicts (twice it: a quartic top's true gain is 1.5 times the
+            # prediction; at most the margin) could take the block past the row's best value.
+            could = best_v + jnp.minimum(2.0 * best_g, margin[:, None]) > v_new[:, None]
+            rest = jnp.where(unsettled & could, jnp.maximum(rest, best_v), rest)
         return taken, tau_new, v_new, sel, rest
 
     # Round one: every row, each block from its best point.
     taken, tau, val, sel, rest = refine(jnp.ones((rows, nb), dtype=bool), top, a2, b2, off2, multi=False, c=c)
     # A refined block whose second hump could still hold more (a flat peak) stays open, ranked by that hump, for the
-    # later rounds, which refine from every local maximum of a block with more Newton steps. Kept per row and
+    # later rounds, which refine from every point of a block with more Newton steps. Kept per row and
     # candidate, not scattered into the (rows × blocks) arrays: the blocks reopened are merged into them only for
     # the rows a later round takes.
     reopen = rest + margin[:, None] > val[:, None]
