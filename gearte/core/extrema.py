@@ -249,10 +249,10 @@ def _tables(orders: tuple[int, ...], m: int) -> tuple[Array, Array]:
 def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_steps: int) -> tuple[Array, Array]:
     """τ of the maximum and of the minimum of the signal over [0, 2π), certified.
 
-    1. **Grid, float32.** The signal on ``m`` grid points (`grid_size`), evaluated in float32 from
-       float64 coefficients; its maximum and minimum per block of half the shortest period. The
-       float32 rounding error is bounded by ``(2K + 4) u (|c₀| + Σ|a_k| + |b_k|)`` (K orders, u = 2⁻²⁴)
-       and added to the certification margin below, so float32 ranks blocks but never decides.
+    1. **Grid, float32.** The signal less its offset c₀ on ``m`` grid points (`grid_size`), evaluated in
+       float32 from float64 coefficients; its maximum and minimum per block of half the shortest period. The
+       float32 rounding error is bounded by ``(2K + 4) u (Σ|a_k| + |b_k|)`` (K orders, u = 2⁻²⁴) and added to
+       the certification margin below, so float32 ranks blocks but never decides; c₀ is added in float64.
     2. **Refinement, float64.** The maximum and the minimum are searched as one problem over 2B
        rows (row r + B is −row r). Each round takes the `candidates` best-ranked unrefined blocks
        of a row, re-evaluates those blocks (and one neighbour each side) in float64, starts from
@@ -287,20 +287,21 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     n = a.shape[0]
     rows = 2 * n
 
-    # 1. float32 grid (unrolled over orders: an elementwise sum whose order never changes with batch size).
+    # 1. float32 grid (unrolled over orders: an elementwise sum whose order never changes with batch size), without the
+    # offset, which ranks no block: its rounding would swamp the oscillation of a signal far from zero.
     f32 = jnp.float32
-    g = off[:, None].astype(f32)
+    g = jnp.zeros((n, m), dtype=f32)
     for j in range(n_orders):
         g = g + a[:, j, None].astype(f32) * cos_tab[j].astype(f32) + b[:, j, None].astype(f32) * sin_tab[j].astype(f32)
     g = g.reshape(n, nb, block)
-    top = jnp.concatenate([jnp.max(g, axis=-1), -jnp.min(g, axis=-1)])  # (2B, nb), float32: ranks blocks
+    top = jnp.concatenate([jnp.max(g, axis=-1), -jnp.min(g, axis=-1)])  # (2B, nb), float32, less the offset
 
     sgn = jnp.concatenate([jnp.ones(n, dtype=a.dtype), -jnp.ones(n, dtype=a.dtype)])
     a2 = sgn[:, None] * jnp.concatenate([a, a])
     b2 = sgn[:, None] * jnp.concatenate([b, b])
     off2 = sgn * jnp.concatenate([off, off])
     u32 = float(np.finfo(np.float32).eps) / 2.0
-    rounding = (2 * n_orders + 4) * 1.01 * u32 * (jnp.abs(off2) + jnp.sum(jnp.abs(a2) + jnp.abs(b2), axis=-1))
+    rounding = (2 * n_orders + 4) * 1.01 * u32 * jnp.sum(jnp.abs(a2) + jnp.abs(b2), axis=-1)
     margin = h * h / 8.0 * jnp.sum(k * k * jnp.sqrt(a2**2 + b2**2), axis=-1) + rounding
     c = min(candidates, nb)
     cos_pt, sin_pt = cos_tab.T, sin_tab.T  # (m, K): cos kτᵢ, sin kτᵢ
@@ -424,12 +425,12 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     # the rows a later round takes.
     reopen = rest + margin[:, None] > val[:, None]
 
-    def bound_of(remaining, top_r):
-        return jnp.max(jnp.where(remaining, top_r, -jnp.inf), axis=-1).astype(val.dtype)
+    def bound_of(remaining, top_r, off_r):
+        return jnp.max(jnp.where(remaining, top_r, -jnp.inf), axis=-1).astype(val.dtype) + off_r
 
     # Each row's bound (the best an unrefined block or a reopened hump could hold, less the margin), computed once
     # for every row and then only for the rows a later round takes: a round costs those rows, not the batch.
-    bound = jnp.maximum(bound_of(~taken, top), jnp.max(jnp.where(reopen, rest, -jnp.inf), axis=-1))
+    bound = jnp.maximum(bound_of(~taken, top, off2), jnp.max(jnp.where(reopen, rest, -jnp.inf), axis=-1))
     state = (~taken, tau, val, reopen, bound)
 
     # Later rounds (near-ties and flat peaks): only the rows still uncertified, `few` at a time, gathered, refined
@@ -448,13 +449,14 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         # The picked rows' reopened blocks join their unrefined ones, ranked by their second hump (or their value).
         sub = jnp.arange(few)[:, None]
         rem_p = remaining[safe].at[sub, sel[safe]].max(reopen[safe])
-        top_p = top[safe].at[sub, sel[safe]].set(jnp.where(reopen[safe], rest[safe].astype(top.dtype), top[safe][sub, sel[safe]]))
+        reopened = (rest[safe] - off2[safe][:, None]).astype(top.dtype)
+        top_p = top[safe].at[sub, sel[safe]].set(jnp.where(reopen[safe], reopened, top[safe][sub, sel[safe]]))
         taken, t_new, v_new, _, _ = refine(rem_p, top_p, a2[safe], b2[safe], off2[safe], multi=True, c=c_later)
         better = v_new > best_val[safe]
         rem_p = rem_p & ~taken
         remaining = remaining.at[pick].set(rem_p, mode="drop")
         reopen = reopen.at[pick].set(False, mode="drop")
-        bound = bound.at[pick].set(bound_of(rem_p, top_p), mode="drop")
+        bound = bound.at[pick].set(bound_of(rem_p, top_p, off2[safe]), mode="drop")
         best_tau = best_tau.at[pick].set(jnp.where(better, t_new, best_tau[safe]), mode="drop")
         best_val = best_val.at[pick].set(jnp.where(better, v_new, best_val[safe]), mode="drop")
         return remaining, best_tau, best_val, reopen, bound
