@@ -70,37 +70,6 @@ def drive_study(teeth: tuple[int, int, int], samples: int):
     return gearte.build_study(raw, str(STUDY), samples=samples)
 
 
-def numpy_extrema(c0, a, b, orders, *, per_period: int = 16, candidates: int = 2, steps: int = 2):
-    """max and min per signal: tabulated grid, the best blocks, Newton steps (gearte's algorithm, no certificate)."""
-    k = np.asarray(orders, dtype=float)
-    m = per_period * max(orders)
-    blk = per_period // 2
-    h = 2 * math.pi / m
-    kt = (np.outer(np.asarray(orders, dtype=np.int64), np.arange(m, dtype=np.int64)) % m) * h
-    basis = np.concatenate([np.cos(kt), np.sin(kt)])  # (2K, m)
-    rows = max(1, 2**24 // (8 * m))  # a block of signals whose grid fits in 16 MB
-    out = []
-    for s0 in range(0, len(c0), rows):
-        cc, aa, bb = c0[s0 : s0 + rows], a[s0 : s0 + rows], b[s0 : s0 + rows]
-        g = cc[:, None] + np.concatenate([aa, bb], axis=1) @ basis
-        best = []
-        for sign in (1.0, -1.0):
-            sg = (sign * g).reshape(len(g), m // blk, blk)
-            top = np.argpartition(-sg.max(axis=2), candidates - 1, axis=1)[:, :candidates]
-            t = (top * blk + np.take_along_axis(sg.argmax(axis=2), top, axis=1)) * h
-            for _ in range(steps):
-                ckt, skt = np.cos(k * t[..., None]), np.sin(k * t[..., None])
-                f1 = np.sum(k * (bb[:, None] * ckt - aa[:, None] * skt), axis=-1)
-                f2 = -np.sum(k * k * (aa[:, None] * ckt + bb[:, None] * skt), axis=-1)
-                ok = sign * f2 < 0
-                t = t - np.where(ok, np.clip(f1 / np.where(ok, f2, 1.0), -h, h), 0.0)
-            f = cc[:, None] + np.sum(aa[:, None] * np.cos(k * t[..., None]) + bb[:, None] * np.sin(k * t[..., None]), axis=-1)
-            best.append(sign * (sign * f).max(axis=1))
-        out.append(np.stack(best, axis=1))
-    got = np.concatenate(out)
-    return got[:, 0], got[:, 1]
-
-
 def dense_excess(c0, a, b, orders, e_max, e_min) -> float:
     """Largest grid value above gearte's maximum (or below its minimum), relative to the span: > 0 is a miss."""
     m = 32 * max(orders)
@@ -127,7 +96,7 @@ def main(argv=None) -> int:
 
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
-    from bench_planetary_mc import machine_info
+    from bench_planetary_mc import machine_info, refined_extrema
 
     import gearte
     from gearte.core.signal import TESignal
@@ -163,7 +132,7 @@ def main(argv=None) -> int:
         e_max, e_min = np.asarray(e.max), np.asarray(e.min)
         excess = dense_excess(c0, a, b, orders, e_max, e_min)
         t0 = time.perf_counter()
-        n_max, n_min = numpy_extrema(c0, a, b, orders)
+        n_max, n_min = refined_extrema(c0, a, b, orders)
         t_numpy = time.perf_counter() - t0
         span = e_max - e_min
         numpy_error = float(np.max(np.maximum(e_max - n_max, n_min - e_min) / span))
