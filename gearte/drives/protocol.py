@@ -326,8 +326,8 @@ class AbstractSinusoidalDrive(AbstractDrive):
         return (
             "exact over the whole hyper-period: a grid of 16 points per period of the fastest term, the best maxima "
             "refined by Newton's method on the exact trigonometric polynomial, every other stretch of the grid bounded "
-            "below them by the polynomial's derivatives (within 1e-6 of the TE's span; a very flat peak, curvature near "
-            "zero at its top, can come out lower by up to about 1e-5 of the span)"
+            "below them by the polynomial's derivatives (within 1e-6 of the TE's span; a very flat top, or two humps "
+            "closer than a grid step, is refined again from every grid point around it)"
         )
 
     def trace(self, errors: Errors) -> Trace:
