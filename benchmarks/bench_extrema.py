@@ -53,15 +53,6 @@ SIGNALS = [
 ]
 
 
-def best_of(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
-
-
 def drive_study(teeth: tuple[int, int, int], samples: int):
     import gearte
 
@@ -96,7 +87,7 @@ def main(argv=None) -> int:
 
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
-    from bench_planetary_mc import machine_info, refined_extrema
+    from bench_planetary_mc import best_of, machine_info, refined_extrema
 
     import gearte
     from gearte.core.signal import TESignal
@@ -113,7 +104,7 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         gearte.monte_carlo(ts, key=study.seed, n_samples=n, progress=False)
         first = time.perf_counter() - t0
-        steady = best_of(lambda ts=ts, n=n, seed=study.seed: gearte.monte_carlo(ts, key=seed, n_samples=n, progress=False), args.repeats)
+        steady = best_of(lambda ts=ts, n=n, seed=study.seed: gearte.monte_carlo(ts, key=seed, n_samples=n, progress=False), args.repeats)[0]
         row = {"case": label, "orders": list(orders), "samples": n, "first_s": first, "steady_s": steady, "per_sample_us": 1e6 * steady / n}
         drives.append(row)
         print(
@@ -128,7 +119,7 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         e = jax.block_until_ready(gearte.extrema(sig))
         first = time.perf_counter() - t0
-        steady = best_of(lambda sig=sig: jax.block_until_ready(gearte.extrema(sig)), args.repeats)
+        steady = best_of(lambda sig=sig: jax.block_until_ready(gearte.extrema(sig)), args.repeats)[0]
         e_max, e_min = np.asarray(e.max), np.asarray(e.min)
         excess = dense_excess(c0, a, b, orders, e_max, e_min)
         t0 = time.perf_counter()

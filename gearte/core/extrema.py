@@ -109,9 +109,12 @@ def check_frequencies(freqs: Sequence[Fraction], *, what: str) -> None:
 
 
 def _basis(orders: tuple[int, ...], m: int, *, wrap: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """cos(kτ_i), sin(kτ_i) on τ_i = 2πi/m, i = 0…m−1 (or −1…m with `wrap`)."""
-    i = np.arange(-1, m + 1) if wrap else np.arange(m)
-    kt = np.outer(np.asarray(orders, dtype=np.float64), _TWO_PI * i / m)
+    """cos(kτ_i), sin(kτ_i) on τ_i = 2πi/m, i = 0…m−1 (or −1…m with `wrap`), shape (K, m) (or (K, m + 2)).
+
+    The angle is reduced exactly, k i mod m, before it is scaled: the tables are correctly rounded whatever k i."""
+    i = np.arange(-1, m + 1, dtype=np.int64) if wrap else np.arange(m, dtype=np.int64)
+    phase = (np.asarray(orders, dtype=np.int64)[:, None] * i) % m
+    kt = phase.astype(np.float64) * (_TWO_PI / m)
     return np.cos(kt), np.sin(kt)
 
 
@@ -237,15 +240,6 @@ FLAT_GAIN = 1e-8
 LATER_CANDIDATES = 16
 
 
-def _tables(orders: tuple[int, ...], m: int) -> tuple[Array, Array]:
-    """cos kτᵢ, sin kτᵢ on τᵢ = 2πi/m, i = 0…m−1, shape (K, m), constants of the compiled search. The angle is
-    reduced exactly, k i mod m, before it is scaled: the tables are correctly rounded whatever k i (computed in the
-    search, XLA would fuse the sines into the grid's sum, once per sample: four times slower)."""
-    phase = (np.asarray(orders, dtype=np.int64)[:, None] * np.arange(m, dtype=np.int64)) % m
-    kt = phase.astype(np.float64) * (_TWO_PI / m)
-    return jnp.asarray(np.cos(kt)), jnp.asarray(np.sin(kt))
-
-
 def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_steps: int) -> tuple[Array, Array]:
     """τ of the maximum and of the minimum of the signal over [0, 2π), certified.
 
@@ -279,7 +273,9 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     nb = m // block
     h = _TWO_PI / m
     k = np.asarray(orders, dtype=np.float64)
-    cos_tab, sin_tab = _tables(orders, m)  # (K, m)
+    # (K, m), constants of the compiled search (computed in it, XLA would fuse the sines into the grid's sum, once per
+    # sample: four times slower).
+    cos_tab, sin_tab = (jnp.asarray(x) for x in _basis(orders, m))
     batch = signal.offset.shape
     a = signal.cos_coef.reshape(-1, n_orders)
     b = signal.sin_coef.reshape(-1, n_orders)
@@ -327,25 +323,24 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         for q in range(n_orders):
             w = w + big_a[q][..., None] * cos_w[:, q] + big_b[q][..., None] * sin_w[:, q]  # float64 window
         inner = w[..., 1:-1]
-        j = _argmax(inner)  # the block's best point, float64
         points = jnp.arange(block)
-        # The block's best local maximum of the window at least two points from its best one: a second hump (a dip
-        # between) that the refinement from one start below does not reach; such a block is refined again, from
-        # every start, where that hump could hold more.
-        hump = (inner >= w[..., :-2]) & (inner >= w[..., 2:]) & (jnp.abs(points - j[..., None]) >= 2)
-        rest = jnp.max(jnp.where(hump, inner, -jnp.inf), axis=-1)
+        rest = None
         if multi:
-            fm, fc, fp = w[..., :-2], inner, w[..., 2:]  # (r, c, block): every point of the block
-            # Every point of the block a start (their values are computed anyway): two humps closer than a grid step
-            # show one grid maximum between them, and the points beyond them lead to each.
-            start = jnp.ones(fc.shape, dtype=bool)
+            # Every point of the block a start: two humps closer than a grid step show one grid maximum between them,
+            # and the points beyond them lead to each.
+            fm, fc, fp = w[..., :-2], inner, w[..., 2:]  # (r, c, block)
             expand = lambda x: x[..., None]  # (r, c) → (r, c, 1)
             first = points
         else:
+            j = _argmax(inner)  # the block's best point, float64
+            # The block's best local maximum of the window at least two points from its best one: a second hump (a
+            # dip between) that the refinement from one start below does not reach; such a block is refined again,
+            # from every start, where that hump could hold more.
+            hump = (inner >= w[..., :-2]) & (inner >= w[..., 2:]) & (jnp.abs(points - j[..., None]) >= 2)
+            rest = jnp.max(jnp.where(hump, inner, -jnp.inf), axis=-1)
             fm = jnp.take_along_axis(w, j[..., None], axis=-1)[..., 0]
             fc = jnp.take_along_axis(w, j[..., None] + 1, axis=-1)[..., 0]
             fp = jnp.take_along_axis(w, j[..., None] + 2, axis=-1)[..., 0]
-            start = None
             expand = lambda x: x
             first = j
         d1 = fm - fp
@@ -357,8 +352,9 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         steps = max(newton_steps, MULTI_START_NEWTON_STEPS) if multi else newton_steps
 
         def newton(t, best_t, best_v, best_g, last: bool):
-            """Evaluate at t, keep the best point visited (the first of equals) and the gain a Newton step from it
-            would predict (infinite where the signal is not concave there), and take a Newton step."""
+            """Evaluate at t, keep the best point visited (the first of equals) and, in the first round, the gain a
+            Newton step from it would predict (infinite where the signal is not concave there), and take a Newton
+            step."""
             c1, s1 = _cis_small(t)
             ck, sk = _cis_powers(c1, s1, orders)  # (r, c, K), or (r, c, block, K) from every start
             fv, f1, f2 = expand(off_r[:, None]), 0.0, 0.0
@@ -369,17 +365,20 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
                 f2 = f2 - kq * kq * even
             concave = f2 < 0.0
             step = jnp.clip(jnp.where(concave, -f1 / jnp.where(concave, f2, 1.0), 0.0), -h, h)
-            # The gain of the (safeguarded) step by the quadratic model, counted where its end lies in the block (to
-            # half a grid step beyond its end points): a hump beyond it is another block's, which the certificate
-            # bounds.
-            inside = (t + step >= 0.5 * h) & (t + step <= (block + 0.5) * h)
-            gain = jnp.where(concave, f1 * step + 0.5 * f2 * step * step, jnp.where(f1 == 0.0, 0.0, jnp.inf))
-            gain = jnp.where(inside, gain, 0.0)
+            gain = None
+            if not multi:
+                # The gain of the (safeguarded) step by the quadratic model, counted where its end lies in the block
+                # (to half a grid step beyond its end points): a hump beyond it is another block's, which the
+                # certificate bounds.
+                inside = (t + step >= 0.5 * h) & (t + step <= (block + 0.5) * h)
+                gain = jnp.where(concave, f1 * step + 0.5 * f2 * step * step, jnp.where(f1 == 0.0, 0.0, jnp.inf))
+                gain = jnp.where(inside, gain, 0.0)
             if best_v is None:
-                best_v, best_g = (fv, gain) if start is None else (jnp.where(start, fv, -jnp.inf), gain)
+                best_v, best_g = fv, gain
             else:
-                better = fv > best_v if start is None else start & (fv > best_v)
-                best_t, best_v, best_g = jnp.where(better, t, best_t), jnp.where(better, fv, best_v), jnp.where(better, gain, best_g)
+                better = fv > best_v
+                best_t, best_v = jnp.where(better, t, best_t), jnp.where(better, fv, best_v)
+                best_g = None if gain is None else jnp.where(better, gain, best_g)
             if not last:
                 t = t + step
             return t, best_t, best_v, best_g
@@ -387,16 +386,16 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         if multi:
             # A loop, not unrolled: XLA would fuse every step into one kernel of thousands of operations, which LLVM
             # took minutes to compile for many orders (16 orders of up to 16,384 periods: over ten minutes; 2 s now).
-            best_v = jnp.full(t.shape, -jnp.inf, dtype=t.dtype)
-            t, best_t, best_v, best_g = jax.lax.fori_loop(0, steps, lambda _, tv: newton(*tv, last=False), (t, t, best_v, best_v))
-            _, best_t, best_v, best_g = newton(t, best_t, best_v, best_g, last=True)
+            best_v, best_g = jnp.full(t.shape, -jnp.inf, dtype=t.dtype), None
+            t, best_t, best_v, _ = jax.lax.fori_loop(0, steps, lambda _, tv: newton(*tv, last=False), (t, t, best_v, None))
+            _, best_t, best_v, _ = newton(t, best_t, best_v, None, last=True)
         else:
             # Unrolled (one or two steps): the steps fuse into one kernel, and no stacking of the steps, which XLA
             # would fuse by recomputing every step once per output.
             best_t, best_v, best_g = t, None, None
             for step_no in range(steps + 1):
                 t, best_t, best_v, best_g = newton(t, best_t, best_v, best_g, last=step_no == steps)
-        assert best_v is not None and best_g is not None
+        assert best_v is not None
         at = expand(p0.astype(w.dtype)) * h
         flat_v, flat_t = best_v.reshape(best_v.shape[0], -1), (best_t + at).reshape(best_v.shape[0], -1)
         best = _argmax(flat_v)[:, None]  # the best candidate (the first of equals)
@@ -405,6 +404,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
         if multi:  # a scatter: the comparison below would hold (rows, c, blocks) booleans, gigabytes for large c
             taken = jnp.zeros(rem.shape, dtype=bool).at[jnp.arange(rem.shape[0])[:, None], sel].set(True)
         else:
+            assert best_g is not None and rest is not None
             taken = jnp.any(jnp.arange(nb) == sel[..., None], axis=-2)
             # A block whose best point a Newton step would still raise (a flat top: f″ near zero, or two humps closer
             # than a grid step with the best point in the dip between them) is reopened like a second hump, ranked
@@ -419,6 +419,7 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
 
     # Round one: every row, each block from its best point.
     taken, tau, val, sel, rest = refine(jnp.ones((rows, nb), dtype=bool), top, a2, b2, off2, multi=False, c=c)
+    assert rest is not None
     # A refined block whose second hump could still hold more (a flat peak) stays open, ranked by that hump, for the
     # later rounds, which refine from every point of a block with more Newton steps. Kept per row and
     # candidate, not scattered into the (rows × blocks) arrays: the blocks reopened are merged into them only for
