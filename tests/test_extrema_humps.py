@@ -11,6 +11,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
 
 from gearte.core import extrema as ex
@@ -136,3 +138,35 @@ def test_two_close_humps_of_a_fast_order_whose_grid_shows_one():
     ref_max, _, span = _dense_extrema(1.0, a, b, (1, 64, 192))
     for newton_steps in (1, 3):
         assert abs(float(extrema(s, newton_steps=newton_steps).max) - ref_max) <= 1e-12 * span
+
+
+def _repeated_argmax(x: np.ndarray, c: int):
+    """The reference of `_top`: c argmaxes (NumPy's, the first of equals), each found entry set to −∞ before the next."""
+    x = x.astype(float).copy()
+    vals, idxs = [], []
+    for _ in range(min(c, x.shape[-1])):
+        i = np.argmax(x, axis=-1)
+        vals.append(np.take_along_axis(x, i[:, None], axis=-1)[:, 0])
+        idxs.append(i)
+        np.put_along_axis(x, i[:, None], -np.inf, axis=-1)
+    return np.stack(vals, axis=-1), np.stack(idxs, axis=-1)
+
+
+@given(
+    st.integers(1, ex.CHAIN_AXIS + 8),
+    st.integers(1, 4),
+    st.integers(0, 2**32 - 1),
+    st.sampled_from([3, 1000]),
+)
+@settings(max_examples=60, deadline=None)
+def test_top_blocks_are_the_repeated_argmax_with_ties_and_minus_infinity(n, c, seed, levels):
+    # The first round's choice of blocks (a chain over the columns up to CHAIN_AXIS, repeated argmax beyond):
+    # few distinct values make many ties, −∞ entries stand for blocks already refined.
+    rng = np.random.default_rng(seed)
+    x = rng.integers(0, levels, size=(7, n)).astype(np.float32)
+    x[rng.random((7, n)) < 0.2] = -np.inf
+    x[0] = -np.inf  # a row of −∞ only
+    vals, idxs = ex._top(jnp.asarray(x), c)
+    ref_v, ref_i = _repeated_argmax(x, c)
+    np.testing.assert_array_equal(np.asarray(idxs), ref_i)
+    np.testing.assert_array_equal(np.asarray(vals), ref_v.astype(np.float32))
