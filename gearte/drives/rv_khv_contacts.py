@@ -40,7 +40,7 @@ import numpy as np
 from jaxtyping import Array
 
 from ..core.units import MM_PER_UM
-from .cycloid_pin_contact import clearances, normal_clearance, pin_layout
+from .cycloid_pin_contact import contact_geometry
 from .cycloid_pin_geometry import CycloidErrors
 from .rv_khv_equilibrium import ContactSystem
 
@@ -100,16 +100,14 @@ def pin_contacts(stage: CycloidPin, errors: CycloidErrors, theta_T) -> tuple[Arr
 
 @eqx.filter_jit
 def _pin_contacts(stage: CycloidPin, errors: CycloidErrors, theta_T) -> tuple[Array, Array, Array, Array]:
-    cl = clearances(stage, errors, theta_T, normal=False)
-    lay = pin_layout(stage, errors, theta_T)
+    lay, rotation_to_contact, gap = contact_geometry(stage, errors, theta_T)
     c = lay.centre
     P = jnp.stack([jnp.zeros(()), stage.z_lobes * stage.eccentricity])
     d = c - P
     N = d / jnp.sqrt(jnp.sum(d * d, axis=-1, keepdims=True))
     lever = _cross(c, N)
-    turning = jnp.isfinite(cl.rotation_to_contact) & (jnp.abs(lever) >= SHORT_LEVER * jnp.max(jnp.abs(lever)))
-    dth = jnp.where(turning, cl.rotation_to_contact, 0.0)
-    gap = normal_clearance(stage, errors, theta_T)
+    turning = jnp.isfinite(rotation_to_contact) & (jnp.abs(lever) >= SHORT_LEVER * jnp.max(jnp.abs(lever)))
+    dth = jnp.where(turning, rotation_to_contact, 0.0)
     e = jnp.where(turning, -lever * dth, -gap)
     touch = jnp.isfinite(e)
     return N, lever, jnp.where(touch, e, -1.0), touch.astype(c.dtype)
