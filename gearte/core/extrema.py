@@ -277,6 +277,15 @@ FLAT_GAIN = 1e-8
 LATER_CANDIDATES = 16
 
 
+#: Signals of at most this many orders have their float32 grid's block maxima and minima kept point by point as the
+#: grid is made (one elementwise pass; `_locate_extrema`), more orders have the grid stored and reduced over its blocks.
+#: The stored grid and its reductions (XNNPACK's, over the 8 points of a block) took three passes over memory: the
+#: example's 50,000 signals (3 orders) 1.8-2.1 µs per signal that way, 1.3-1.7 point by point; 8 orders, the same or
+#: a little less. For 16 orders XLA computes the whole grid once for the maxima and once more for the minima: 4.4 µs
+#: per signal stored against 6.0 (16 orders to 21), 2.2 ms against 5.2 (16 orders to 16,384).
+POINTWISE_ORDERS = 8
+
+
 def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_steps: int) -> tuple[Array, Array]:
     """τ of the maximum and of the minimum of the signal over [0, 2π), certified.
 
@@ -312,7 +321,8 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     k = np.asarray(orders, dtype=np.float64)
     # (K, m), constants of the compiled search (computed in it, XLA would fuse the sines into the grid's sum, once per
     # sample: four times slower).
-    cos_tab, sin_tab = (jnp.asarray(x) for x in _basis(orders, m))
+    cos_np, sin_np = _basis(orders, m)
+    cos_tab, sin_tab = jnp.asarray(cos_np), jnp.asarray(sin_np)
     batch = signal.offset.shape
     a = signal.cos_coef.reshape(-1, n_orders)
     b = signal.sin_coef.reshape(-1, n_orders)
@@ -321,22 +331,27 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     rows = 2 * n
 
     # 1. float32 grid (unrolled over orders: an elementwise sum whose order never changes with batch size), without the
-    # offset, which ranks no block: its rounding would swamp the oscillation of a signal far from zero. Each block's
-    # maximum and minimum are kept point by point as the grid is made (one elementwise pass, the grid never stored):
-    # the grid stored and reduced over its blocks took three passes over memory (the reductions XNNPACK's). The same
-    # float32 values: the search of the example's 50,000 signals took 1.9-2.1 µs per signal, 1.7 now; 2,000 random
-    # signals of a coprime drive's orders (713, 1,771, 2,387), 159 µs, 147 now.
+    # offset, which ranks no block: its rounding would swamp the oscillation of a signal far from zero. For a few
+    # orders (`POINTWISE_ORDERS`) each block's maximum and minimum are kept point by point as the grid is made (the
+    # grid never stored); for more, the grid is stored and reduced over its blocks. The same float32 values either way.
     f32 = jnp.float32
-    a32, b32 = a.astype(f32), b.astype(f32)
-    c32 = cos_tab.astype(f32).reshape(n_orders, nb, block)
-    s32 = sin_tab.astype(f32).reshape(n_orders, nb, block)
-    points = []  # the grid's i-th point of every block (n × nb)
-    for i in range(block):
-        gi = jnp.zeros((n, nb), dtype=f32)
+    if n_orders <= POINTWISE_ORDERS:
+        a32, b32 = a.astype(f32), b.astype(f32)
+        # The float32 tables by point of the block, (K, block, nb): each point's values of every block contiguous.
+        c32, s32 = (jnp.asarray(x.astype(np.float32).reshape(n_orders, nb, block).transpose(0, 2, 1).copy()) for x in (cos_np, sin_np))
+        points = []  # the grid's i-th point of every block (n × nb)
+        for i in range(block):
+            gi = jnp.zeros((n, nb), dtype=f32)
+            for j in range(n_orders):
+                gi = gi + a32[:, j, None] * c32[j, i] + b32[:, j, None] * s32[j, i]
+            points.append(gi)
+        hi, lo = functools.reduce(jnp.maximum, points), functools.reduce(jnp.minimum, points)
+    else:
+        g = jnp.zeros((n, m), dtype=f32)
         for j in range(n_orders):
-            gi = gi + a32[:, j, None] * c32[j, :, i] + b32[:, j, None] * s32[j, :, i]
-        points.append(gi)
-    hi, lo = functools.reduce(jnp.maximum, points), functools.reduce(jnp.minimum, points)
+            g = g + a[:, j, None].astype(f32) * cos_tab[j].astype(f32) + b[:, j, None].astype(f32) * sin_tab[j].astype(f32)
+        g = g.reshape(n, nb, block)
+        hi, lo = jnp.max(g, axis=-1), jnp.min(g, axis=-1)
     top = jnp.concatenate([hi, -lo])  # (2B, nb), float32, less the offset
 
     sgn = jnp.concatenate([jnp.ones(n, dtype=a.dtype), -jnp.ones(n, dtype=a.dtype)])
