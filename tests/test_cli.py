@@ -62,6 +62,27 @@ def test_library_entry_points_refuse_float32_clearly():
     assert p.returncode == 0 and p.stdout.split("\n")[:-1] == [f"{n} refused" for n in names], p.stdout + p.stderr
 
 
+def test_the_rv_contact_systems_refuse_float32_clearly():
+    """The RV reducer's contact systems (public in gearte.drives.rv_khv_contacts) refuse without 64-bit mode, as the
+    cycloid-pin functions they are built on do."""
+    code = (
+        "import jax; jax.config.update('jax_enable_x64', True)\n"
+        "from gearte.cli.config import load_study; from gearte.drives import rv_khv_contacts as rc\n"
+        "d = load_study('examples/rv_robot_joint.toml').drive; err = d.errors(None)\n"
+        "e0 = rc.cycloid_errors(d, err, 0); jax.config.update('jax_enable_x64', False)\n"
+        "calls = {'pin_contacts': lambda: rc.pin_contacts(d.stage, e0, 0.1),\n"
+        "    'single_disc_system': lambda: rc.single_disc_system(d.stage, e0, 0.1), 'rv_system': lambda: rc.rv_system(d, err, 0.1, 1.0)}\n"
+        "for name, call in calls.items():\n"
+        "    try:\n        print(name, 'computed', call())\n    except RuntimeError as e:\n"
+        "        print(name, 'refused' if 'jax_enable_x64' in str(e) else e)"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
+    env["PYTHONPATH"] = str(ROOT)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT)
+    names = ("pin_contacts", "single_disc_system", "rv_system")
+    assert p.returncode == 0 and p.stdout.split("\n")[:-1] == [f"{n} refused" for n in names], p.stdout + p.stderr
+
+
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
 def test_examples_run_and_write_every_output(path, tmp_path):
     out = tmp_path / "res"

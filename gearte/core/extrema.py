@@ -169,6 +169,9 @@ def _derivatives(signal: TESignal, tau: Array) -> tuple[Array, Array, Array]:
 #: each index, 45 of the 90 ms of the example's 50,000 samples; the chain takes 4. The chain is not used inside the
 #: refinement: fused with the Newton steps whose values it compares, XLA computed them again for every comparison.)
 CHAIN_AXIS = 64
+#: ... and for at most this many entries: the chains are unrolled, c of them over the axis (16 candidates over 62
+#: blocks made a program of 42,000 lines that took minutes to compile).
+CHAIN_CANDIDATES = 4
 
 
 def _argmax(x: Array) -> Array:
@@ -187,9 +190,15 @@ def _top(score: Array, c: int) -> tuple[Array, Array]:
     index is 0, as the repeated argmax finds it."""
     n = score.shape[-1]
     c = min(c, n)
-    if n > CHAIN_AXIS:
-        idx = _top_indices(score, c)
-        return jnp.take_along_axis(score, idx, axis=-1), idx
+    if n > CHAIN_AXIS or c > CHAIN_CANDIDATES:
+        pos = jnp.arange(n)
+        vals, idxs = [], []
+        for _ in range(c):
+            i = _argmax(score)
+            vals.append(jnp.take_along_axis(score, i[..., None], axis=-1)[..., 0])
+            idxs.append(i)
+            score = jnp.where(pos == i[..., None], -jnp.inf, score)
+        return jnp.stack(vals, axis=-1), jnp.stack(idxs, axis=-1)
     cols = [score[..., i] for i in range(n)]
     vals, idxs = [], []
     for _ in range(c):
@@ -284,6 +293,9 @@ LATER_CANDIDATES = 16
 #: a little less. For 16 orders XLA computes the whole grid once for the maxima and once more for the minima: 4.4 µs
 #: per signal stored against 6.0 (16 orders to 21), 2.2 ms against 5.2 (16 orders to 16,384).
 POINTWISE_ORDERS = 8
+#: ... and at most this many terms (orders × points per block) are unrolled that way: 8 orders at 64 points per period
+#: (32 per block) took 7.6 s to compile instead of 1.4, at 128 points 53 s.
+POINTWISE_TERMS = 64
 
 
 def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_steps: int) -> tuple[Array, Array]:
@@ -333,9 +345,10 @@ def _locate_extrema(signal: TESignal, oversample: int, candidates: int, newton_s
     # 1. float32 grid (unrolled over orders: an elementwise sum whose order never changes with batch size), without the
     # offset, which ranks no block: its rounding would swamp the oscillation of a signal far from zero. For a few
     # orders (`POINTWISE_ORDERS`) each block's maximum and minimum are kept point by point as the grid is made (the
-    # grid never stored); for more, the grid is stored and reduced over its blocks. The same float32 values either way.
+    # grid never stored); for more, the grid is stored and reduced over its blocks. The float32 values of either way lie
+    # within the rounding bound below (XLA may contract the sums' products differently).
     f32 = jnp.float32
-    if n_orders <= POINTWISE_ORDERS:
+    if n_orders <= POINTWISE_ORDERS and n_orders * block <= POINTWISE_TERMS:
         a32, b32 = a.astype(f32), b.astype(f32)
         # The float32 tables by point of the block, (K, block, nb): each point's values of every block contiguous.
         c32, s32 = (jnp.asarray(x.astype(np.float32).reshape(n_orders, nb, block).transpose(0, 2, 1).copy()) for x in (cos_np, sin_np))

@@ -253,6 +253,7 @@ def contact_geometry(drive: CycloidPin, errors: ErrorsLike, input_angle: ArrayLi
     theoretical position (`normal_clearance`, mm), the values those functions give. For a model built on this
     geometry (the RV reducer's discs): each of those functions lays the pins out again, and in one program XLA
     compiles every layout (a fifth of an RV program's compilation)."""
+    require_x64()
     err = checked_errors(drive, errors)
     theta_T = jnp.asarray(input_angle, dtype=float)
     pins = _pins(drive, err, theta_T)
