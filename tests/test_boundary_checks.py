@@ -326,7 +326,7 @@ def test_a_hyper_period_whose_exact_extrema_would_not_fit_is_refused_by_every_dr
     its own two-scale search grids the slow orders only). Two orders reach 2²³ / 32 = 262,144 periods."""
     from fractions import Fraction
 
-    from gearte.core.extrema import MAX_GRID_ENTRIES, grid_entries
+    from gearte.core.grid import MAX_GRID_ENTRIES, grid_entries
 
     assert MAX_GRID_ENTRIES == 2**23
     d = gearte.Planetary2KH(z_sun=301, z_planet=299, z_ring=899, n_planets=3, module=1.0)

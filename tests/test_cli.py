@@ -39,48 +39,53 @@ def test_importing_gearte_changes_no_global_state():
     assert p.returncode == 0 and p.stdout.strip() == "ok", p.stderr
 
 
-def test_library_entry_points_refuse_float32_clearly():
-    """Without JAX's 64-bit mode every entry point refuses with the fix, none computes in float32: the Monte Carlo,
-    a drive's signal (the README's first steps), and the exact peaks of a signal built before x64 was turned off."""
+def _refusals_without_x64(setup: str, calls: str) -> str:
+    """Run `setup` (64-bit mode on), turn 64-bit mode off, then each of the `calls` (a dict of name → callable, as
+    code) in a fresh interpreter; prints "<name> refused" for each that refuses with the fix (its RuntimeError names
+    jax_enable_x64), else what it computed or raised. Returns the output."""
     code = (
-        "import gearte, jax, jax.numpy as jnp; from gearte.drives import wang2013\n"
-        "d = wang2013.table1_drive(); m = gearte.ErrorModel({n: gearte.ErrorSource(gearte.Fixed(t), gearte.UniformPhase()) "
-        "for n, t in wang2013.TABLE1_TOLERANCES_UM.items()}, d.error_sources)\n"
-        "errors = d.zero_errors()\n"
-        "jax.config.update('jax_enable_x64', True); sig = d.signal(errors); jax.config.update('jax_enable_x64', False)\n"
-        "calls = {'monte_carlo': lambda: gearte.monte_carlo(gearte.TEStudy(d, m), key=1, n_samples=8),\n"
-        "    'signal': lambda: d.signal(errors), 'peak': lambda: gearte.peak(sig), 'extrema': lambda: gearte.extrema(sig),\n"
-        "    'smooth_peak': lambda: gearte.smooth_peak(sig, width=1e-6), 'evaluate': lambda: gearte.evaluate(sig, 0.0)}\n"
-        "for name, call in calls.items():\n"
-        "    try:\n        print(name, 'computed', call())\n    except RuntimeError as e:\n"
-        "        print(name, 'refused' if 'jax_enable_x64' in str(e) else e)"
+        "import jax; jax.config.update('jax_enable_x64', True)\n"
+        + setup
+        + "\njax.config.update('jax_enable_x64', False)\n"
+        + f"calls = {calls}\n"
+        + "for name, call in calls.items():\n"
+        + "    try:\n        print(name, 'computed', call())\n    except RuntimeError as e:\n"
+        + "        print(name, 'refused' if 'jax_enable_x64' in str(e) else e)"
     )
     env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
     env["PYTHONPATH"] = str(ROOT)
-    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert p.returncode == 0, p.stdout + p.stderr
+    return p.stdout
+
+
+def test_library_entry_points_refuse_float32_clearly():
+    """Without JAX's 64-bit mode every entry point refuses with the fix, none computes in float32: the Monte Carlo,
+    a drive's signal (the README's first steps), and the exact peaks of a signal built before x64 was turned off."""
+    out = _refusals_without_x64(
+        "import gearte, jax.numpy as jnp; from gearte.drives import wang2013\n"
+        "d = wang2013.table1_drive(); m = gearte.ErrorModel({n: gearte.ErrorSource(gearte.Fixed(t), gearte.UniformPhase()) "
+        "for n, t in wang2013.TABLE1_TOLERANCES_UM.items()}, d.error_sources)\n"
+        "errors = d.zero_errors(); sig = d.signal(errors)",
+        "{'monte_carlo': lambda: gearte.monte_carlo(gearte.TEStudy(d, m), key=1, n_samples=8), "
+        "'signal': lambda: d.signal(errors), 'peak': lambda: gearte.peak(sig), 'extrema': lambda: gearte.extrema(sig), "
+        "'smooth_peak': lambda: gearte.smooth_peak(sig, width=1e-6), 'evaluate': lambda: gearte.evaluate(sig, 0.0)}",
+    )
     names = ("monte_carlo", "signal", "peak", "extrema", "smooth_peak", "evaluate")
-    assert p.returncode == 0 and p.stdout.split("\n")[:-1] == [f"{n} refused" for n in names], p.stdout + p.stderr
+    assert out.split("\n")[:-1] == [f"{n} refused" for n in names], out
 
 
 def test_the_rv_contact_systems_refuse_float32_clearly():
     """The RV reducer's contact systems (public in gearte.drives.rv_khv_contacts) refuse without 64-bit mode, as the
     cycloid-pin functions they are built on do."""
-    code = (
-        "import jax; jax.config.update('jax_enable_x64', True)\n"
+    out = _refusals_without_x64(
         "from gearte.cli.config import load_study; from gearte.drives import rv_khv_contacts as rc\n"
-        "d = load_study('examples/rv_robot_joint.toml').drive; err = d.errors(None)\n"
-        "e0 = rc.cycloid_errors(d, err, 0); jax.config.update('jax_enable_x64', False)\n"
-        "calls = {'pin_contacts': lambda: rc.pin_contacts(d.stage, e0, 0.1),\n"
-        "    'single_disc_system': lambda: rc.single_disc_system(d.stage, e0, 0.1), 'rv_system': lambda: rc.rv_system(d, err, 0.1, 1.0)}\n"
-        "for name, call in calls.items():\n"
-        "    try:\n        print(name, 'computed', call())\n    except RuntimeError as e:\n"
-        "        print(name, 'refused' if 'jax_enable_x64' in str(e) else e)"
+        "d = load_study('examples/rv_robot_joint.toml').drive; err = d.errors(None); e0 = rc.cycloid_errors(d, err, 0)",
+        "{'pin_contacts': lambda: rc.pin_contacts(d.stage, e0, 0.1), "
+        "'single_disc_system': lambda: rc.single_disc_system(d.stage, e0, 0.1), 'rv_system': lambda: rc.rv_system(d, err, 0.1, 1.0)}",
     )
-    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
-    env["PYTHONPATH"] = str(ROOT)
-    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT)
     names = ("pin_contacts", "single_disc_system", "rv_system")
-    assert p.returncode == 0 and p.stdout.split("\n")[:-1] == [f"{n} refused" for n in names], p.stdout + p.stderr
+    assert out.split("\n")[:-1] == [f"{n} refused" for n in names], out
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)

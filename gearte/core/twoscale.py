@@ -32,7 +32,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .extrema import _basis, _candidates, _derivatives, _grid_values, extrema, grid_size
+from .extrema import extrema
+from .grid import _basis, _candidates, _derivatives, _grid_values, grid_size
 from .signal import TESignal, evaluate
 from .units import TWO_PI as _TWO_PI
 from .validate import as_int

@@ -15,7 +15,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..core.extrema import check_frequencies
+from ..core.grid import check_frequencies
 from ..core.schema import ConfigError, Table
 from ..core.signal import Components, FrequencyLike, as_frequency
 from ..core.units import ARCSEC_PER_RAD

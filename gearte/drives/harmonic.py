@@ -104,7 +104,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..core.extrema import grid_size
+from ..core.grid import grid_size
 from ..core.metrics import RMS, AbstractMetric, Peak, PeakToPeak
 from ..core.programs import kept_jit
 from ..core.schema import ConfigError, Table

@@ -23,7 +23,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, PRNGKeyArray
 
-from ..core.extrema import _basis, _grid_values, grid_size
+from ..core.grid import _basis, _grid_values, grid_size
 from ..core.precision import require_x64
 from ..core.programs import kept_jit
 from ..core.signal import to_signal

@@ -31,7 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
-from ..core.extrema import Extrema, extrema, grid_size
+from ..core.extrema import Extrema, extrema
+from ..core.grid import grid_size
 from ..core.metrics import RMS, AbstractMetric, Peak, PeakToPeak
 from ..core.programs import kept_jit
 from ..core.signal import Components, TESignal, evaluate, to_signal
